@@ -1,0 +1,316 @@
+"""Typed config schemas (Hydra ConfigStore), one documented field each, and their validation."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING, DictConfig, ListConfig, OmegaConf
+
+
+class ConfigError(ValueError):
+    """A composed config holds a value that is physically or logically impossible."""
+
+
+def spec(default: Any, doc: str, **rules: Any) -> Any:
+    """A dataclass field with a docstring and validation rules.
+
+    Rules: ``gt``/``ge`` (numbers, applied to every element of a list), ``choices`` (allowed
+    values), ``length`` (exact list length).
+    """
+    meta = {"doc": doc, **rules}
+    if isinstance(default, list | dict):
+        return field(default_factory=lambda: type(default)(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+class Mode(StrEnum):
+    train = "train"
+    eval = "eval"
+    train_eval = "train_eval"
+
+
+class FilterMode(StrEnum):
+    mask = "mask"
+    penalty = "penalty"
+    off = "off"
+
+
+class EnvBackend(StrEnum):
+    serial = "serial"
+    parallel = "parallel"
+
+
+@dataclass
+class SimConfig:
+    timestep_s: float = spec(1 / 240, "Physics timestep (s); the torque law runs every step.", gt=0)
+    solver_iterations: int = spec(50, "PyBullet constraint-solver iterations per step.", gt=0)
+    gravity_mps2: float = spec(9.81, "Gravity magnitude (m/s^2), pointing along -z.", ge=0)
+
+
+@dataclass
+class HandConfig:
+    finger_base_x_m: list[float] = spec(
+        [-0.12, 0.0, 0.12], "x of each finger's base joint (m), left to right.", length=3
+    )
+    base_z_m: float = spec(0.0, "z of the finger base joints (m).")
+    link_lengths_m: list[float] = spec(
+        [0.16, 0.16], "Proximal and distal link lengths (m), joint to joint/tip centre.",
+        gt=0, length=2,
+    )
+    link_masses_kg: list[float] = spec([0.05, 0.05], "Proximal and distal link masses (kg).",
+                                       gt=0, length=2)
+    link_radius_m: float = spec(0.008, "Radius of the link capsules (m).", gt=0)
+    tip_radius_m: float = spec(0.012, "Radius of the spherical fingertip (m).", gt=0)
+    tip_mass_kg: float = spec(0.01, "Mass of the fingertip sphere (kg).", gt=0)
+    friction: float = spec(1.0, "Lateral friction coefficient of the fingertips.", ge=0)
+    max_torque_nm: float = spec(10.0, "Joint torque limit (N m), applied to every command.", gt=0)
+    joint_lower_rad: list[float] = spec([-math.pi, -2.8], "Lower joint limits (rad).", length=2)
+    joint_upper_rad: list[float] = spec([math.pi, 2.8], "Upper joint limits (rad).", length=2)
+
+
+@dataclass
+class ObjectConfig:
+    name: str = spec("pole", "Object shape.", choices=("pole", "cube"))
+    length_m: float = spec(0.50, "Extent along the object's long axis (m).", gt=0)
+    width_m: float = spec(0.02, "Extent across the long axis, in the hand plane (m).", gt=0)
+    depth_m: float = spec(0.05, "Extent along y, out of the hand plane (m).", gt=0)
+    mass_kg: float = spec(0.1, "Mass (kg); inertia is that of a uniform box.", gt=0)
+    friction: float = spec(1.0, "Lateral friction coefficient of the object surface.", ge=0)
+
+
+@dataclass
+class PerturbConfig:
+    name: str = spec("none", "Label of the perturbation, for logs and tables.")
+    mass_scale: float = spec(1.0, "Simulated mass / nominal mass.", gt=0)
+    width_scale: float = spec(1.0, "Simulated width / nominal width.", gt=0)
+    length_scale: float = spec(1.0, "Simulated length / nominal length.", gt=0)
+
+
+@dataclass
+class NoiseConfig:
+    name: str = spec("none", "Label of the noise model, for logs and tables.")
+    xz_m: float = spec(0.0, "Half-width of uniform noise on observed object x and z (m).", ge=0)
+    theta_rad: float = spec(0.0, "Half-width of uniform noise on observed object angle (rad).",
+                            ge=0)
+
+
+@dataclass
+class PrimitivesConfig:
+    name: str = spec("pole", "Primitive set.", choices=("pole", "cube"))
+    repose_dx_m: float = spec(0.01, "Repose step along x (m).", gt=0)
+    repose_dz_m: float = spec(0.01, "Repose step along z (m).", gt=0)
+    repose_dtheta_rad: float = spec(0.1, "Repose step in angle (rad).", gt=0)
+    slide_dc_m: float = spec(0.02, "Slide step of one fingertip along the surface (m).", gt=0)
+    slide: bool = spec(True, "Offer the slide actions (6 for the pole).")
+    flip: bool = spec(True, "Offer flip-left / flip-right (pole).")
+    release_land: bool = spec(False, "Offer release / land per finger (cube).")
+    repose_duration_s: float = spec(0.5, "Simulated time given to one repose (s).", gt=0)
+    slide_duration_s: float = spec(0.5, "Simulated time given to one slide (s).", gt=0)
+    flip_duration_s: float = spec(1.5, "Simulated time given to one flip (s).", gt=0)
+    kp: float = spec(400.0, "Object-pose PD stiffness (1/s^2).", ge=0)
+    kd: float = spec(40.0, "Object-pose PD damping (1/s).", ge=0)
+    min_normal_force_n: float = spec(0.5, "Least normal force at every held contact (N).", ge=0)
+    friction_margin: float = spec(0.8, "Fraction of the friction cone the controller may use.",
+                                  gt=0)
+
+
+@dataclass
+class GoalsConfig:
+    name: str = spec("medium", "Difficulty group.", choices=("easy", "medium", "hard"))
+    test_pairs: int = spec(500, "Test (X0, Xg) pairs in the group.", gt=0)
+    train_pairs: int = spec(20000, "Training pairs, drawn apart from the test set.", gt=0)
+    seed: int = spec(1234, "Seed of the dataset, the same for every learner.", ge=0)
+
+
+@dataclass
+class LearnerConfig:
+    name: str = spec(MISSING, "Learner.", choices=("ppo", "ddpg", "search"))
+
+
+@dataclass
+class PPOConfig(LearnerConfig):
+    name: str = spec("ppo", "Learner.", choices=("ppo",))
+    lr: float = spec(3e-4, "Adam learning rate.", gt=0)
+    gamma: float = spec(0.99, "Discount per mid-level action.", gt=0)
+    gae_lambda: float = spec(0.95, "GAE lambda.", ge=0)
+    clip_epsilon: float = spec(0.2, "PPO ratio clip.", gt=0)
+    entropy_coef: float = spec(0.01, "Entropy bonus weight.", ge=0)
+    critic_coef: float = spec(0.5, "Value-loss weight.", ge=0)
+    hidden: list[int] = spec([256, 256, 256], "Hidden layer sizes of policy and critic.", gt=0)
+    frames_per_batch: int = spec(1024, "Mid-level actions collected per iteration.", gt=0)
+    epochs: int = spec(4, "Optimisation epochs per batch.", gt=0)
+    minibatch_size: int = spec(256, "Minibatch size.", gt=0)
+    max_grad_norm: float = spec(1.0, "Gradient clipping norm.", gt=0)
+
+
+@dataclass
+class DDPGConfig(LearnerConfig):
+    name: str = spec("ddpg", "Learner.", choices=("ddpg",))
+    actor_lr: float = spec(1e-4, "Actor learning rate.", gt=0)
+    critic_lr: float = spec(1e-3, "Critic learning rate.", gt=0)
+    gamma: float = spec(0.99, "Discount per control step.", gt=0)
+    tau: float = spec(0.005, "Target-network soft-update rate.", gt=0)
+    hidden: list[int] = spec([256, 256, 256], "Hidden layer sizes.", gt=0)
+    buffer_size: int = spec(1_000_000, "Replay buffer capacity (transitions).", gt=0)
+    batch_size: int = spec(256, "Minibatch size.", gt=0)
+    exploration_std: float = spec(0.1, "Gaussian exploration noise, fraction of max torque.",
+                                  ge=0)
+    control_period_s: float = spec(1 / 60, "Torque-policy period (s), a whole number of steps.",
+                                   gt=0)
+
+
+@dataclass
+class SearchConfig(LearnerConfig):
+    name: str = spec("search", "Learner.", choices=("search",))
+    resolution_m: float = spec(0.02, "Grid resolution of object x and z (m); paper: 2 cm.", gt=0)
+    resolution_rad: float = spec(0.2, "Grid resolution of the object angle (rad); paper: 0.2.",
+                                 gt=0)
+    contact_resolution_m: float = spec(0.05, "Grid resolution of contact positions (m); paper: "
+                                       "5 cm.", gt=0)
+    max_nodes: int = spec(2_000_000, "Node budget of one Dijkstra search.", gt=0)
+
+
+@dataclass
+class TaskConfig:
+    filter: FilterMode = spec(FilterMode.mask, "Feasibility filter: mask, penalty (paper), off.")
+    reward_goal: float = spec(5.0, "Reward on reaching the goal.")
+    reward_invalid: float = spec(-0.01, "Reward of an infeasible action (penalty mode).")
+    reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")
+    success_tol_m: float = spec(0.01, "Success tolerance on |dx| and |dz| (m).", gt=0)
+    success_tol_rad: float = spec(0.1, "Success tolerance on |dtheta| (rad).", gt=0)
+    max_actions: int = spec(50, "Time limit in mid-level actions.", gt=0)
+
+
+@dataclass
+class TrainConfig:
+    frames: int = spec(20_000, "Training budget in mid-level actions.", gt=0)
+    num_envs: int = spec(16, "Environments collecting in parallel.", gt=0)
+    workers: int = spec(2, "Worker processes for the environments (<= cores).", gt=0)
+    backend: EnvBackend = spec(EnvBackend.parallel, "Batched env: parallel or serial.")
+    checkpoint_every: int = spec(10, "Iterations between checkpoints.", gt=0)
+
+
+@dataclass
+class EvalConfig:
+    episodes: int = spec(500, "Episodes per goal group.", gt=0)
+    goals_file: str | None = spec(None, "CSV/Parquet goal set to evaluate on instead.")
+
+
+@dataclass
+class LogConfig:
+    file: str = spec("run.mcap", "Log file name inside the run directory.")
+    sim_state_hz: float = spec(20.0, "Rate of /sim/state messages (Hz of sim time); 0 = off.",
+                               ge=0)
+    chunk_size_bytes: int = spec(32 * 1024, "MCAP chunk size (bytes).", gt=0)
+    flush_every_s: float = spec(2.0, "Longest wall time between flushes (s).", gt=0)
+    progress: bool = spec(True, "Show a progress bar on the terminal.")
+
+
+@dataclass
+class Config:
+    sim: SimConfig = MISSING
+    hand: HandConfig = MISSING
+    object: ObjectConfig = MISSING
+    perturb: PerturbConfig = MISSING
+    noise: NoiseConfig = MISSING
+    primitives: PrimitivesConfig = MISSING
+    goals: GoalsConfig = MISSING
+    learner: LearnerConfig = MISSING
+    task: TaskConfig = field(default_factory=TaskConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    log: LogConfig = field(default_factory=LogConfig)
+    seed: int = spec(0, "Seed of everything random in the run.", ge=0)
+    mode: Mode = spec(Mode.train_eval, "What the run does: train, eval or train_eval.")
+    checkpoint: str | None = spec(None, "Policy checkpoint to evaluate or resume from.")
+
+
+GROUP_SCHEMAS: dict[str, type] = {
+    "sim": SimConfig,
+    "hand": HandConfig,
+    "object": ObjectConfig,
+    "perturb": PerturbConfig,
+    "noise": NoiseConfig,
+    "primitives": PrimitivesConfig,
+    "goals": GoalsConfig,
+}
+LEARNER_SCHEMAS: dict[str, type] = {"ppo": PPOConfig, "ddpg": DDPGConfig, "search": SearchConfig}
+
+
+def register_configs() -> None:
+    """Store the schemas: ``schema`` for the root, ``<group>/schema`` for each group option."""
+    cs = ConfigStore.instance()
+    cs.store(name="schema", node=Config)
+    for group, node in GROUP_SCHEMAS.items():
+        cs.store(group=group, name="schema", node=node)
+    for name, node in LEARNER_SCHEMAS.items():
+        cs.store(group="learner", name=f"schema_{name}", node=node)
+
+
+def validate(cfg: DictConfig) -> None:
+    """Reject unknown keys and impossible values, naming the key and the value."""
+    _check_node(cfg, "")
+    _check_consistency(cfg)
+
+
+def _check_node(node: DictConfig, path: str) -> None:
+    schema = OmegaConf.get_type(node)
+    if not dataclasses.is_dataclass(schema):
+        return
+    fields = {f.name: f for f in dataclasses.fields(schema)}
+    for key in node:
+        if key not in fields:
+            where = f"{path}{key}"
+            raise ConfigError(f"unknown key '{where}': {schema.__name__} has no field '{key}' "
+                              f"(known: {', '.join(fields)})")
+    for name, f in fields.items():
+        value = node[name]
+        key = f"{path}{name}"
+        if isinstance(value, DictConfig):
+            _check_node(value, f"{key}.")
+            continue
+        _check_value(key, value, f.metadata)
+
+
+def _check_value(key: str, value: Any, rules: Any) -> None:
+    if "length" in rules and len(value) != rules["length"]:
+        raise ConfigError(f"{key} must have {rules['length']} entries, got {len(value)}: "
+                          f"{list(value)}")
+    items = list(enumerate(value)) if isinstance(value, ListConfig) else [(None, value)]
+    for i, v in items:
+        name = key if i is None else f"{key}[{i}]"
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ConfigError(f"{name} must be a finite number, got {v}")
+        if "gt" in rules and not v > rules["gt"]:
+            raise ConfigError(f"{name} must be > {rules['gt']}, got {v}")
+        if "ge" in rules and not v >= rules["ge"]:
+            raise ConfigError(f"{name} must be >= {rules['ge']}, got {v}")
+        if "choices" in rules and v not in rules["choices"]:
+            raise ConfigError(f"{name} must be one of {list(rules['choices'])}, got {v!r}")
+
+
+def _check_consistency(cfg: DictConfig) -> None:
+    """Cross-field rules: matching object and primitives, whole step ratios, joint limits."""
+    if cfg.object.name != cfg.primitives.name:
+        raise ConfigError(f"primitives={cfg.primitives.name} does not fit object="
+                          f"{cfg.object.name}; choose primitives={cfg.object.name}")
+    lo, hi = cfg.hand.joint_lower_rad, cfg.hand.joint_upper_rad
+    for i, (a, b) in enumerate(zip(lo, hi, strict=True)):
+        if not a < b:
+            raise ConfigError(f"hand.joint_lower_rad[{i}] must be < hand.joint_upper_rad[{i}], "
+                              f"got {a} >= {b}")
+    dt = cfg.sim.timestep_s
+    durations = {f"primitives.{k}": cfg.primitives[k]
+                 for k in ("repose_duration_s", "slide_duration_s", "flip_duration_s")}
+    if cfg.learner.name == "ddpg":
+        durations["learner.control_period_s"] = cfg.learner.control_period_s
+    for key, duration in durations.items():
+        steps = duration / dt
+        if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
+            raise ConfigError(f"{key}={duration} is not a whole number of physics steps of "
+                              f"sim.timestep_s={dt} ({steps:.4f} steps)")

@@ -1,0 +1,52 @@
+"""What a run records about itself: resolved config, package versions, git state, start time."""
+
+from __future__ import annotations
+
+import datetime as dt
+import importlib.metadata
+import platform
+import subprocess
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+PACKAGES = ("inhand-exp", "torch", "torchrl", "tensordict", "pybullet", "hydra-core",
+            "omegaconf", "mcap", "numpy", "scipy", "pandas")
+
+
+def package_versions() -> dict[str, str]:
+    """Installed versions of the packages that decide a run's results, plus Python's."""
+    versions = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def git_state(path: Path) -> dict[str, Any] | None:
+    """Commit and dirty flag of the checkout holding ``path``, or None outside git."""
+    try:
+        def git(*args: str) -> str:
+            return subprocess.run(["git", *args], cwd=path, capture_output=True, text=True,
+                                  check=True, timeout=10).stdout.strip()
+        return {"commit": git("rev-parse", "HEAD"),
+                "dirty": bool(git("status", "--porcelain", "--untracked-files=no"))}
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def run_config_message(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> dict[str, Any]:
+    """The ``/run/config`` message: everything needed to reproduce the run."""
+    return {
+        "config": OmegaConf.to_container(cfg, resolve=True, enum_to_str=True),
+        "versions": package_versions(),
+        "seed": int(cfg.seed),
+        "mode": str(cfg.mode.value if hasattr(cfg.mode, "value") else cfg.mode),
+        "overrides": list(overrides),
+        "run_dir": str(run_dir),
+        "started_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "git": git_state(Path(__file__).resolve().parent),
+    }

@@ -1,0 +1,84 @@
+"""The ``inhand-exp`` app end to end: run layout, the /run/config log, errors, multirun."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from inhand_exp.record import read_log
+
+APP = [sys.executable, "-c", "from inhand_exp.cli import main; main()"]
+
+
+def inhand_exp(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
+    return subprocess.run([*APP, *args], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=180)
+
+
+def run_config(path: Path) -> dict:
+    log = read_log(path)
+    assert not log.truncated and log.corrupt_chunks == 0
+    (msg,) = log.topic("/run/config")
+    return msg
+
+
+def test_default_run_goes_under_logs_runs_date_time(tmp_path):
+    res = inhand_exp("seed=7", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    (log_path,) = tmp_path.glob("logs/runs/*/*/run.mcap")
+    date, time = log_path.parent.parent.name, log_path.parent.name
+    assert len(date) == 10 and date[4] == "-" and len(time) == 8
+    assert str(log_path.parent) in res.stdout
+    assert (log_path.parent / ".hydra" / "config.yaml").is_file()
+    msg = run_config(log_path)
+    assert msg["seed"] == 7 and msg["config"]["seed"] == 7
+    assert msg["config"]["object"]["name"] == "pole"
+    assert msg["versions"]["torch"].startswith("2.13")
+    assert msg["overrides"] == ["seed=7"]
+
+
+def test_config_error_exits_before_writing_a_log(tmp_path):
+    res = inhand_exp("object.mass_kg=-1", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
+    assert res.returncode == 2
+    assert "object.mass_kg must be > 0, got -1.0" in res.stderr
+    assert not (tmp_path / "run" / "run.mcap").exists()
+
+
+def test_typo_exits_naming_the_key(tmp_path):
+    res = inhand_exp("object.mas_kg=1", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
+    assert res.returncode != 0
+    assert "object.mas_kg" in res.stderr
+
+
+def test_existing_log_is_never_overwritten(tmp_path):
+    run_dir = tmp_path / "run"
+    first = inhand_exp(f"hydra.run.dir={run_dir}", cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    before = (run_dir / "run.mcap").read_bytes()
+    second = inhand_exp(f"hydra.run.dir={run_dir}", cwd=tmp_path)
+    assert second.returncode != 0
+    assert "run.mcap" in second.stderr
+    assert (run_dir / "run.mcap").read_bytes() == before
+
+
+@pytest.mark.parametrize("launcher", [[], ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]],
+                         ids=["basic", "joblib"])
+def test_two_job_multirun_leaves_two_readable_logs(tmp_path, launcher):
+    sweep = tmp_path / "sweep"
+    res = inhand_exp("-m", "seed=0,1", *launcher, f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    seeds = sorted(run_config(sweep / job / "run.mcap")["seed"] for job in ("0", "1"))
+    assert seeds == [0, 1]
+
+
+def test_multirun_default_layout(tmp_path):
+    res = inhand_exp("-m", "goals=easy,hard", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    logs = sorted(tmp_path.glob("logs/multirun/*/*/*/run.mcap"))
+    assert [p.parent.name for p in logs] == ["0", "1"]
+    assert [run_config(p)["config"]["goals"]["name"] for p in logs] == ["easy", "hard"]

@@ -122,7 +122,7 @@ def test_impossible_values_name_field_and_value(compose_cfg, override, message):
     (["object=cube", "primitives=pole"], "primitives=pole does not fit object=cube"),
     (["primitives.repose_duration_s=0.501"], "not a whole number of physics steps"),
     (["hand.joint_lower_rad=[1,0]", "hand.joint_upper_rad=[0,1]"],
-     "hand.joint_lower_rad[0] must be < hand.joint_upper_rad[0]"),
+     "hand.joint_lower_rad[0] < hand.joint_upper_rad[0]"),
 ])
 def test_inconsistent_settings_are_rejected(compose_cfg, overrides, message):
     with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):

@@ -69,8 +69,10 @@ class HandConfig:
     tip_mass_kg: float = spec(0.01, "Mass of the fingertip sphere (kg).", gt=0)
     friction: float = spec(1.0, "Lateral friction coefficient of the fingertips.", ge=0)
     max_torque_nm: float = spec(10.0, "Joint torque limit (N m), applied to every command.", gt=0)
-    joint_lower_rad: list[float] = spec([-math.pi, -2.8], "Lower joint limits (rad).", length=2)
-    joint_upper_rad: list[float] = spec([math.pi, 2.8], "Upper joint limits (rad).", length=2)
+    joint_lower_rad: list[float] = spec([-0.5, -2.8], "Lower joint limits (rad); angles from +x, "
+                                        "counter-clockwise.", length=2)
+    joint_upper_rad: list[float] = spec([math.pi + 0.5, 2.8], "Upper joint limits (rad); a "
+                                        "range of at most 2 pi.", length=2)
 
 
 @dataclass
@@ -301,9 +303,9 @@ def _check_consistency(cfg: DictConfig) -> None:
                           f"{cfg.object.name}; choose primitives={cfg.object.name}")
     lo, hi = cfg.hand.joint_lower_rad, cfg.hand.joint_upper_rad
     for i, (a, b) in enumerate(zip(lo, hi, strict=True)):
-        if not a < b:
-            raise ConfigError(f"hand.joint_lower_rad[{i}] must be < hand.joint_upper_rad[{i}], "
-                              f"got {a} >= {b}")
+        if not a < b <= a + 2 * math.pi:
+            raise ConfigError(f"hand.joint_lower_rad[{i}] < hand.joint_upper_rad[{i}] <= "
+                              f"hand.joint_lower_rad[{i}] + 2 pi must hold, got {a}, {b}")
     dt = cfg.sim.timestep_s
     durations = {f"primitives.{k}": cfg.primitives[k]
                  for k in ("repose_duration_s", "slide_duration_s", "flip_duration_s")}

@@ -1,0 +1,94 @@
+"""Run one primitive to its end on a world, torque every physics step, and report the outcome."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the controllers see: joints exactly, the object pose possibly with noise."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    pose: np.ndarray
+    twist: np.ndarray
+    t: float  # time since the primitive started (s)
+
+
+class Primitive(Protocol):
+    """A low-level controller: planned at the first observation, then torques every step."""
+
+    duration_s: float
+
+    def start(self, obs: Observation) -> str | None:
+        """Plan from the first observation; a reason string if the primitive is infeasible."""
+
+    def torques(self, obs: Observation) -> np.ndarray | None:
+        """Joint torques (6,) for this step, or None if the forces became infeasible."""
+
+
+class WorldLike(Protocol):
+    dt: float
+    time_s: float
+
+    def object_state(self) -> tuple[np.ndarray, np.ndarray]: ...
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]: ...
+    def step(self, tau: np.ndarray) -> None: ...
+    def grasp_lost(self) -> str | None: ...
+    def unstable(self) -> str | None: ...
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a primitive ended: ``reason`` is done, infeasible, lost_contact, unstable."""
+
+    ok: bool
+    reason: str
+    detail: str
+    sim_time_s: float
+    steps: int
+
+
+def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | None = None,
+            check_every: int = 4, drop_grace_s: float = 0.05) -> Outcome:
+    """Drive ``primitive`` for its duration; stop early on infeasibility, a drop or instability.
+
+    ``pose_offset`` is the observation error on the object pose (noise drawn by the caller, held
+    for the primitive). The grasp is checked from PyBullet's contacts every ``check_every`` steps;
+    a loss lasting ``drop_grace_s`` is a drop.
+    """
+    offset = np.zeros(3) if pose_offset is None else pose_offset
+    n = round(primitive.duration_s / world.dt)
+    lost_since: float | None = None
+
+    def observe(t: float) -> Observation:
+        pose, twist = world.object_state()
+        q, qd = world.joint_state()
+        return Observation(q, qd, pose + offset, twist, t)
+
+    why = primitive.start(observe(0.0))
+    if why is not None:
+        return Outcome(False, "infeasible", why, 0.0, 0)
+    for k in range(n):
+        tau = primitive.torques(observe(k * world.dt))
+        if tau is None:
+            return Outcome(False, "infeasible", "no contact forces inside the friction cones",
+                           k * world.dt, k)
+        world.step(tau)
+        if (k + 1) % check_every:
+            continue
+        bad = world.unstable()
+        if bad is not None:
+            return Outcome(False, "unstable", bad, (k + 1) * world.dt, k + 1)
+        lost = world.grasp_lost()
+        if lost is None:
+            lost_since = None
+        elif lost_since is None:
+            lost_since = k * world.dt
+        elif (k + 1) * world.dt - lost_since >= drop_grace_s:
+            return Outcome(False, "lost_contact", lost, (k + 1) * world.dt, k + 1)
+    return Outcome(True, "done", "", n * world.dt, n)

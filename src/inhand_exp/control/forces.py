@@ -1,0 +1,153 @@
+"""Contact-force distribution (paper eq. 2-4): balance the object wrench inside the friction cones.
+
+``lam`` stacks ``(f_n, f_t)`` per contact (N), as in ``grasp.grasp_matrix``. Two solvers:
+
+- ``solve_lp``: the exact linear program ``G lam = w``, ``f_n >= f_min``, ``|f_t| <= mu f_n``,
+  ``f_n <= f_max``, least total squeeze; ``None`` when infeasible. About a millisecond: used for
+  feasibility checks and as the reference in tests.
+- ``Squeeze``: for one contact configuration (``G`` constant in the object frame), the internal
+  force ``lam0`` in the null space of ``G`` that lies deepest inside all cones, found once by an
+  LP. Each control step then takes ``lam = pinv(G) w + alpha lam0`` with the least ``alpha`` that
+  satisfies every constraint: a one-dimensional LP with a closed-form answer, cheap enough for
+  the torque loop. Where no strict squeeze exists (e.g. two fingers on one side and a third
+  that only slides), each step solves the full LP for its wrench instead, which may still be
+  feasible thanks to gravity; infeasible when that LP is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+
+def _cone_rows(k: int, mu: float) -> np.ndarray:
+    """Rows ``A`` with ``A lam <= 0`` meaning ``|f_t| <= mu f_n`` for each of ``k`` contacts."""
+    A = np.zeros((2 * k, 2 * k))
+    for i in range(k):
+        A[2 * i, 2 * i], A[2 * i, 2 * i + 1] = -mu, 1.0
+        A[2 * i + 1, 2 * i], A[2 * i + 1, 2 * i + 1] = -mu, -1.0
+    return A
+
+
+def solve_lp(G: np.ndarray, w: np.ndarray, mu: float, f_min: float,
+             f_max: float = np.inf) -> np.ndarray | None:
+    """Contact forces with ``G lam = w`` inside the cones and bounds, least total normal force."""
+    k = G.shape[1] // 2
+    cost = np.tile([1.0, 0.0], k)
+    bounds = [(f_min, None if np.isinf(f_max) else f_max), (None, None)] * k
+    res = linprog(cost, A_ub=_cone_rows(k, mu), b_ub=np.zeros(2 * k), A_eq=G, b_eq=w,
+                  bounds=bounds, method="highs")
+    return res.x if res.status == 0 else None
+
+
+@dataclass(frozen=True)
+class Squeeze:
+    """Precomputed distribution for one contact configuration (see module docstring).
+
+    Contacts in ``coupled`` (sliding fingers) have one free variable, ``f_n``, and a tangential
+    force tied to it, ``f_t = coupled[i] * f_n``: zero for a push without friction, ``+-mu``
+    for kinetic friction on a contact that slides.
+    """
+
+    pinv: np.ndarray  # (m, 3): minimum-norm particular solution over the free variables
+    lam0: np.ndarray  # (m,): internal force with sum f_n = 1, strictly inside the cones
+    margin: float  # least slack of lam0 in its constraints (> 0 when usable)
+    cols: np.ndarray  # (m,): column of each free variable in the full ``lam`` (2k,)
+    tied: np.ndarray  # (c, 3): (free variable, column of f_t, coefficient) of coupled contacts
+    G: np.ndarray  # (3, m): grasp matrix over the free variables
+    fn: np.ndarray  # positions of the normal forces among the free variables
+    fric: np.ndarray  # (j, 2): positions of (f_n, f_t) of the contacts with friction
+    size: int  # 2k
+    mu: float
+    f_min: float
+    f_max: float
+
+    @classmethod
+    def build(cls, G: np.ndarray, mu: float, f_min: float, f_max: float = np.inf,
+              coupled: dict[int, float] | None = None) -> Squeeze:
+        """Find the internal force deepest inside the cones (LP), normalised to sum f_n = 1."""
+        k = G.shape[1] // 2
+        coupled = coupled or {}
+        cols = [c for i in range(k) for c in ((2 * i,) if i in coupled else (2 * i, 2 * i + 1))]
+        pos = {c: j for j, c in enumerate(cols)}
+        fn = np.array([pos[2 * i] for i in range(k)])
+        fric = np.array([(pos[2 * i], pos[2 * i + 1]) for i in range(k) if i not in coupled],
+                        dtype=int).reshape(-1, 2)
+        tied = np.array([(pos[2 * i], 2 * i + 1, c) for i, c in coupled.items()]).reshape(-1, 3)
+        Gr = G[:, cols].copy()
+        for i, c in coupled.items():
+            Gr[:, pos[2 * i]] += c * G[:, 2 * i + 1]
+        m = len(cols)
+        # variables (lam0, s): maximise s with f_n >= s, mu f_n -+ f_t >= s, G lam0 = 0.
+        rows = []
+        for a, b in fric:
+            for sign in (1.0, -1.0):
+                r = np.zeros(m + 1)
+                r[a], r[b], r[m] = -mu, sign, 1.0
+                rows.append(r)
+        for a in fn:
+            r = np.zeros(m + 1)
+            r[a], r[m] = -1.0, 1.0
+            rows.append(r)
+        A_eq = np.zeros((4, m + 1))
+        A_eq[:3, :m] = Gr
+        A_eq[3, fn] = 1.0
+        cost = np.zeros(m + 1)
+        cost[m] = -1.0
+        res = linprog(cost, A_ub=np.array(rows), b_ub=np.zeros(len(rows)), A_eq=A_eq,
+                      b_eq=np.array([0.0, 0.0, 0.0, 1.0]),
+                      bounds=[(None, None)] * m + [(None, 1.0)], method="highs")
+        lam0, margin = (res.x[:m], float(res.x[m])) if res.status == 0 else (np.zeros(m), 0.0)
+        return cls(np.linalg.pinv(Gr), lam0, margin, np.array(cols), tied, Gr, fn, fric, 2 * k,
+                   mu, f_min, f_max)
+
+    @property
+    def usable(self) -> bool:
+        """True when a strict internal squeeze exists: every wrench is then a closed form."""
+        return self.margin > 1e-9
+
+    def solve(self, w: np.ndarray) -> np.ndarray | None:
+        """Forces ``lam`` (2k,) balancing wrench ``w`` (same frame as ``G``), or None."""
+        red = self._closed_form(w) if self.usable else self._lp(w)
+        if red is None:
+            return None
+        lam = np.zeros(self.size)
+        lam[self.cols] = red
+        for var, col, coef in self.tied:
+            lam[int(col)] = coef * red[int(var)]
+        return lam
+
+    def _lp(self, w: np.ndarray) -> np.ndarray | None:
+        m = len(self.cols)
+        rows = []
+        for a, b in self.fric:
+            for sign in (1.0, -1.0):
+                r = np.zeros(m)
+                r[a], r[b] = -self.mu, sign
+                rows.append(r)
+        cost = np.zeros(m)
+        cost[self.fn] = 1.0
+        bounds = [(None, None)] * m
+        for a in self.fn:
+            bounds[a] = (self.f_min, None if np.isinf(self.f_max) else self.f_max)
+        res = linprog(cost, A_ub=np.array(rows) if rows else None,
+                      b_ub=np.zeros(len(rows)) if rows else None, A_eq=self.G, b_eq=w,
+                      bounds=bounds, method="highs")
+        return res.x if res.status == 0 else None
+
+    def _closed_form(self, w: np.ndarray) -> np.ndarray | None:
+        lp = self.pinv @ w
+        l0 = self.lam0
+        mu = self.mu
+        bounds = [0.0, float(np.max((self.f_min - lp[self.fn]) / l0[self.fn]))]
+        if len(self.fric):
+            a, b = self.fric[:, 0], self.fric[:, 1]
+            # every coefficient below is >= margin > 0
+            bounds.append(float(np.max((lp[b] - mu * lp[a]) / (mu * l0[a] - l0[b]))))
+            bounds.append(float(np.max((-lp[b] - mu * lp[a]) / (mu * l0[a] + l0[b]))))
+        red = lp + max(bounds) * l0
+        if np.max(red[self.fn]) > self.f_max:
+            return None
+        return red

@@ -1,0 +1,183 @@
+"""Repose (paper eq. 4-5): move the object by contact forces while every contact stays put.
+
+Per physics step: a PD on the object pose around a minimum-jerk reference gives the desired
+object acceleration; the object's nominal dynamics give the wrench the contacts must apply; the
+force distribution (``forces.Squeeze``) splits it into contact forces inside the friction cones;
+each finger then gets inverse-dynamics torques that move its tip like the object-fixed contact
+point, plus ``J_c^T f`` to push with its share of the force. Hold is a repose to the current pose.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from inhand_exp.control.forces import Squeeze
+from inhand_exp.control.grasp import contact_frames, grasp_matrix, rotation
+from inhand_exp.control.hand import HandModel
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Object-pose PD gains (1/s^2, 1/s) and force-distribution limits (N)."""
+
+    kp: float = 400.0
+    kd: float = 40.0
+    f_min: float = 0.5
+    f_max: float = 50.0
+    friction_margin: float = 0.8
+
+
+@dataclass(frozen=True)
+class GraspPlan:
+    """A contact configuration frozen in the object frame, with its force distribution.
+
+    Built once per primitive from the measured fingertips and the observed object pose.
+    """
+
+    fingers: tuple[int, ...]  # fingers in contact, in order of the columns of G
+    levers_O: np.ndarray  # (k, 2) contact points from the COM, object frame (m)
+    normals_O: np.ndarray  # (k, 2) inward normals, object frame
+    tips_O: np.ndarray  # (k, 2) fingertip centres from the COM, object frame (m)
+    squeeze: Squeeze
+
+    @classmethod
+    def from_state(cls, model: HandModel, contacts, pose: np.ndarray, q: np.ndarray,
+                   gains: Gains, sliding: int | None = None, drag: float = 0.0) -> GraspPlan:
+        """Plan for ``contacts`` (which fingers and faces) at the fingertips' measured places.
+
+        Each active tip is projected onto its face: the contact coordinate comes from the
+        joints (measured) and the object pose (observed), not from a commanded target. The
+        ``sliding`` finger gets a normal force plus ``drag`` times it along the contact
+        tangent (kinetic friction; zero for a frictionless push).
+        """
+        R = rotation(pose[2])
+        tips_W = model.tips(q)
+        _, nrm_W = contact_frames(model.shape, contacts, pose)
+        fingers = tuple(i for i in range(3) if contacts.active[i])
+        tips_O = np.array([R.T @ (tips_W[i] - pose[:2]) for i in fingers])
+        normals_O = np.array([R.T @ nrm_W[i] for i in fingers])
+        levers_O = tips_O + model.tip_radius * normals_O
+        G = grasp_matrix(levers_O, normals_O)
+        coupled = {k: drag for k, i in enumerate(fingers) if i == sliding}
+        sq = Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min, gains.f_max,
+                           coupled)
+        return cls(fingers, levers_O, normals_O, tips_O, sq)
+
+
+def min_jerk(start: np.ndarray, goal: np.ndarray, duration: float, t: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position, velocity and acceleration of a minimum-jerk path at time ``t``."""
+    if t >= duration:
+        z = np.zeros_like(start)
+        return goal.copy(), z, z
+    s = t / duration
+    d = goal - start
+    p = start + d * (10 * s**3 - 15 * s**4 + 6 * s**5)
+    v = d * (30 * s**2 - 60 * s**3 + 30 * s**4) / duration
+    a = d * (60 * s - 180 * s**2 + 120 * s**3) / duration**2
+    return p, v, a
+
+
+def object_wrench(model: HandModel, gains: Gains, pose: np.ndarray, twist: np.ndarray,
+                  ref: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Desired object acceleration (world) and the contact wrench that causes it (object frame).
+
+    The wrench is what the contacts must apply on the nominal object: ``M a + (0, m g, 0)``.
+    """
+    p_ref, v_ref, a_ref = ref
+    err = p_ref - pose
+    err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
+    acc = a_ref + gains.kd * (v_ref - twist) + gains.kp * err
+    shape = model.shape
+    R = rotation(pose[2])
+    F_W = shape.mass_kg * np.array([acc[0], acc[1] + model.fingers[0].gravity])
+    return acc, np.array([*(R.T @ F_W), shape.inertia * acc[2]])
+
+
+def contact_force(plan: GraspPlan, lam: np.ndarray, k: int, R: np.ndarray) -> np.ndarray:
+    """World force (2,) that contact ``k`` of ``plan`` applies on the object."""
+    n_W = R @ plan.normals_O[k]
+    return lam[2 * k] * n_W + lam[2 * k + 1] * np.array([-n_W[1], n_W[0]])
+
+
+def push_torque(model: HandModel, i: int, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                f_W: np.ndarray, n_W: np.ndarray) -> np.ndarray:
+    """Finger ``i``'s torques (2,): inverse dynamics for ``qdd`` plus ``J_c^T f_W``.
+
+    ``J_c`` is the Jacobian of the contact point, a tip radius from the tip centre along the
+    inward normal ``n_W``.
+    """
+    finger = model.fingers[i]
+    qi, qdi = q[2 * i:2 * i + 2], qd[2 * i:2 * i + 2]
+    off = model.tip_radius * n_W
+    Jc = finger.jacobian(qi) + np.array([[-off[1], -off[1]], [off[0], off[0]]])
+    return (finger.mass_matrix(qi) @ qdd + finger.coriolis(qi, qdi)
+            + finger.gravity_torque(qi) + Jc.T @ f_W)
+
+
+def follow_qdd(model: HandModel, i: int, q: np.ndarray, qd: np.ndarray, tip_O: np.ndarray,
+               acc: np.ndarray, omega: float, R: np.ndarray) -> np.ndarray:
+    """Joint accelerations moving finger ``i``'s tip like the object point at ``tip_O``."""
+    finger = model.fingers[i]
+    qi, qdi = q[2 * i:2 * i + 2], qd[2 * i:2 * i + 2]
+    r = R @ tip_O
+    a_tip = acc[:2] + acc[2] * np.array([-r[1], r[0]]) - omega**2 * r
+    return _solve_damped(finger.jacobian(qi), a_tip - finger.jacobian_dot_qd(qi, qdi))
+
+
+def repose_torques(model: HandModel, plan: GraspPlan, gains: Gains, q: np.ndarray,
+                   qd: np.ndarray, pose: np.ndarray, twist: np.ndarray,
+                   ref: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray | None:
+    """Joint torques (6,) for the fingers in ``plan``; None when the forces are infeasible.
+
+    ``pose``/``twist`` are the observed object state, ``ref`` the reference (pose, velocity,
+    acceleration). Fingers outside the plan get zero torque (the caller drives them).
+    """
+    acc, w_O = object_wrench(model, gains, pose, twist, ref)
+    lam = plan.squeeze.solve(w_O)
+    if lam is None:
+        return None
+    R = rotation(pose[2])
+    tau = np.zeros(6)
+    for k, i in enumerate(plan.fingers):
+        qdd = follow_qdd(model, i, q, qd, plan.tips_O[k], acc, twist[2], R)
+        tau[2 * i:2 * i + 2] = push_torque(model, i, q, qd, qdd, contact_force(plan, lam, k, R),
+                                           R @ plan.normals_O[k])
+    return tau
+
+
+def _solve_damped(J: np.ndarray, b: np.ndarray, damping: float = 1e-4) -> np.ndarray:
+    """``J^-1 b`` with damped least squares near singular postures."""
+    return J.T @ np.linalg.solve(J @ J.T + damping * np.eye(2), b)
+
+
+class Repose:
+    """Primitive: move the object by ``delta`` (dx, dz, dtheta) keeping every contact.
+
+    The reference moves along a minimum-jerk path for ``move_fraction`` of the duration, then
+    holds still so the object settles. ``Repose(model, contacts, zeros, T)`` is a hold.
+    """
+
+    def __init__(self, model: HandModel, contacts, delta: np.ndarray, duration_s: float,
+                 gains: Gains | None = None, move_fraction: float = 0.7):
+        self.model, self.contacts, self.delta = model, contacts, np.asarray(delta, float)
+        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.move_s = move_fraction * duration_s
+
+    def start(self, obs) -> str | None:
+        self.plan = GraspPlan.from_state(self.model, self.contacts, obs.pose, obs.q, self.gains)
+        _, w_O = object_wrench(self.model, self.gains, obs.pose, np.zeros(3),
+                               (obs.pose, np.zeros(3), np.zeros(3)))
+        if self.plan.squeeze.solve(w_O) is None:
+            return "no contact forces inside the friction cones hold the object here"
+        self.origin = obs.pose.copy()
+        self.goal = self.origin + self.delta
+        return None
+
+    def torques(self, obs) -> np.ndarray | None:
+        ref = min_jerk(self.origin, self.goal, self.move_s, obs.t)
+        return repose_torques(self.model, self.plan, self.gains, obs.q, obs.qd, obs.pose,
+                              obs.twist, ref)

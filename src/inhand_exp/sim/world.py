@@ -1,0 +1,266 @@
+"""The PyBullet world: three planar torque-controlled fingers and a planar object, with accessors.
+
+What collides: only the three spherical fingertips touch the object. The finger links are
+modelled as lying in parallel planes beside the object (as a real hand's fingers sit at different
+depths), so links pass beside the object and beside each other; fingers never touch one another.
+A fingertip, being in the object's plane, can never pass through the object to its other side:
+getting round it takes a flip.
+
+The object is a dynamic box on a world-fixed chain (prismatic x, prismatic z, revolute about -y)
+whose joint motors are disabled, so it moves only through contact forces and gravity. The
+fingers run under TORQUE_CONTROL with their velocity motors disabled. After ``reset`` nothing
+sets the state of any body.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+
+from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
+from inhand_exp.sim.urdf import finger_urdf, object_urdf
+
+TIP_LINK = 2  # link index of the fingertip in each finger
+BODY_LINK = 2  # link index of the object body in the object chain
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """Geometry and mass of a box-shaped object: long axis ``length_m`` along its local x."""
+
+    length_m: float
+    width_m: float
+    depth_m: float
+    mass_kg: float
+    friction: float
+
+    @classmethod
+    def from_config(cls, obj: ObjectConfig, perturb: PerturbConfig | None = None) -> ObjectSpec:
+        """The object as configured, scaled by ``perturb`` (the simulated object only)."""
+        p = perturb or PerturbConfig()
+        return cls(obj.length_m * p.length_scale, obj.width_m * p.width_scale, obj.depth_m,
+                   obj.mass_kg * p.mass_scale, obj.friction)
+
+    @property
+    def inertia(self) -> float:
+        """Moment of inertia about the axis normal to the plane through the COM (kg m^2)."""
+        return self.mass_kg * (self.length_m**2 + self.width_m**2) / 12
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One fingertip-object contact, in the hand frame.
+
+    ``normal`` is the unit normal pointing from the fingertip into the object; ``tangent`` is
+    the in-plane unit vector 90 deg counter-clockwise of it. Forces are those the finger exerts
+    on the object (N).
+    """
+
+    finger: int
+    position: np.ndarray
+    normal: np.ndarray
+    normal_force: float
+    tangential_force: float
+
+    @property
+    def tangent(self) -> np.ndarray:
+        return np.array([-self.normal[1], self.normal[0]])
+
+
+class World:
+    """One PyBullet DIRECT client holding the hand and the object."""
+
+    def __init__(self, sim: SimConfig, hand: HandConfig, obj: ObjectSpec):
+        self.dt = sim.timestep_s
+        self.max_torque = hand.max_torque_nm
+        self.obj = obj
+        self._cid = pb.connect(pb.DIRECT)
+        cid = self._cid
+        pb.setGravity(0, 0, -sim.gravity_mps2, physicsClientId=cid)
+        pb.setPhysicsEngineParameter(fixedTimeStep=sim.timestep_s,
+                                     numSolverIterations=sim.solver_iterations,
+                                     numSubSteps=0, deterministicOverlappingPairs=1,
+                                     physicsClientId=cid)
+        with tempfile.TemporaryDirectory() as tmp:
+            self.fingers = [self._load(Path(tmp) / f"finger{i}.urdf", _finger_text(hand),
+                                       (x, 0.0, hand.base_z_m))
+                            for i, x in enumerate(hand.finger_base_x_m)]
+            self.object = self._load(Path(tmp) / "object.urdf", object_urdf(
+                obj.length_m, obj.width_m, obj.depth_m, obj.mass_kg), (0.0, 0.0, 0.0))
+        self._setup_dynamics(hand, obj)
+        self._steps = 0
+
+    def _load(self, path: Path, text: str, base: tuple[float, float, float]) -> int:
+        path.write_text(text)
+        return pb.loadURDF(str(path), base, useFixedBase=True,
+                           flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=self._cid)
+
+    def _setup_dynamics(self, hand: HandConfig, obj: ObjectSpec) -> None:
+        cid = self._cid
+        for body, n in [(self.object, 3)] + [(f, 3) for f in self.fingers]:
+            for link in range(-1, n):
+                pb.changeDynamics(body, link, linearDamping=0.0, angularDamping=0.0,
+                                  jointDamping=0.0, physicsClientId=cid)
+        for body in [self.object, *self.fingers]:
+            pb.setJointMotorControlArray(body, [0, 1, 2] if body == self.object else [0, 1],
+                                         pb.VELOCITY_CONTROL,
+                                         forces=[0.0] * (3 if body == self.object else 2),
+                                         physicsClientId=cid)
+        pb.changeDynamics(self.object, BODY_LINK, lateralFriction=obj.friction,
+                          spinningFriction=0.0, rollingFriction=0.0, restitution=0.0,
+                          physicsClientId=cid)
+        for f in self.fingers:
+            pb.changeDynamics(f, TIP_LINK, lateralFriction=hand.friction, spinningFriction=0.0,
+                              rollingFriction=0.0, restitution=0.0, physicsClientId=cid)
+            for link in (0, 1):  # links lie in planes beside the object
+                pb.setCollisionFilterPair(self.object, f, BODY_LINK, link, 0,
+                                          physicsClientId=cid)
+            for g in self.fingers:
+                if g > f:
+                    for a in range(-1, 3):
+                        for b in range(-1, 3):
+                            pb.setCollisionFilterPair(f, g, a, b, 0, physicsClientId=cid)
+
+    # --- state ------------------------------------------------------------------------------
+
+    def reset(self, pose: np.ndarray, q: np.ndarray) -> None:
+        """Place the object at ``pose`` (x, z, theta) and the fingers at ``q`` (6,), at rest."""
+        cid = self._cid
+        for j in range(3):
+            pb.resetJointState(self.object, j, float(pose[j]), 0.0, physicsClientId=cid)
+        for i, f in enumerate(self.fingers):
+            for j in range(2):
+                pb.resetJointState(f, j, float(q[2 * i + j]), 0.0, physicsClientId=cid)
+        self._steps = 0
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time since the last reset (s)."""
+        return self._steps * self.dt
+
+    def object_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Object pose ``(x, z, theta)`` (m, m, rad) and twist ``(vx, vz, omega)``."""
+        states = pb.getJointStates(self.object, (0, 1, 2), physicsClientId=self._cid)
+        return (np.array([s[0] for s in states]), np.array([s[1] for s in states]))
+
+    def object_pose(self) -> np.ndarray:
+        return self.object_state()[0]
+
+    def object_twist(self) -> np.ndarray:
+        return self.object_state()[1]
+
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Joint angles ``q`` (6,) (rad) and velocities ``qd`` (6,), finger by finger."""
+        q, qd = [], []
+        for f in self.fingers:
+            for s in pb.getJointStates(f, (0, 1), physicsClientId=self._cid):
+                q.append(s[0])
+                qd.append(s[1])
+        return np.array(q), np.array(qd)
+
+    def joint_q(self) -> np.ndarray:
+        return self.joint_state()[0]
+
+    def joint_qd(self) -> np.ndarray:
+        return self.joint_state()[1]
+
+    def tip_positions(self) -> np.ndarray:
+        """Fingertip centres (3, 2) in the hand frame (x, z) (m), as simulated."""
+        out = np.empty((3, 2))
+        for i, f in enumerate(self.fingers):
+            p = pb.getLinkState(f, TIP_LINK, computeForwardKinematics=1,
+                                physicsClientId=self._cid)[4]
+            out[i] = p[0], p[2]
+        return out
+
+    def contacts(self) -> list[Contact]:
+        """Fingertip-object contacts with the forces the solver applied in the last step."""
+        out = []
+        for c in pb.getContactPoints(bodyA=self.object, linkIndexA=BODY_LINK,
+                                     physicsClientId=self._cid):
+            if c[4] != TIP_LINK or c[2] not in self.fingers:
+                continue
+            normal = np.array([c[7][0], c[7][2]])  # contactNormalOnB: from the tip B to A
+            normal = normal / (float(np.hypot(*normal)) or 1.0)
+            tangent = np.array([-normal[1], normal[0]])
+            lateral = c[10] * np.array(c[11]) + c[12] * np.array(c[13])
+            out.append(Contact(self.fingers.index(c[2]), np.array([c[6][0], c[6][2]]), normal,
+                               float(c[9]), float(tangent @ lateral[[0, 2]])))
+        return out
+
+    def grasp_lost(self) -> str | None:
+        """Why the object is not held, judged from PyBullet's contact points, or None if held.
+
+        Held means at least two fingertips touch the object and two of them push from opposite
+        sides (inward normals more than 120 deg apart).
+        """
+        contacts = self.contacts()
+        fingers = {c.finger for c in contacts}
+        if len(fingers) < 2:
+            return f"only {len(fingers)} fingertip(s) in contact"
+        normals = [c.normal for c in contacts]
+        if not any(float(a @ b) < -0.5 for i, a in enumerate(normals) for b in normals[i + 1:]):
+            return "object not held from opposite sides"
+        return None
+
+    def unstable(self, max_speed: float = 20.0, max_joint_speed: float = 200.0) -> str | None:
+        """Why the simulated state is unusable (NaN, runaway velocity), or None if it is fine."""
+        pose, twist = self.object_state()
+        q, qd = self.joint_state()
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))
+                and np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            return "non-finite state"
+        if float(np.hypot(twist[0], twist[1])) > max_speed or abs(twist[2]) > max_joint_speed:
+            return f"object velocity ran away ({twist.round(2).tolist()})"
+        if float(np.max(np.abs(qd))) > max_joint_speed:
+            return f"joint velocity ran away (max {float(np.max(np.abs(qd))):.1f} rad/s)"
+        return None
+
+    # --- stepping ---------------------------------------------------------------------------
+
+    def step(self, tau: np.ndarray) -> None:
+        """Apply joint torques ``tau`` (6,) (N m, clipped to the limit) for one physics step."""
+        cid = self._cid
+        tau = np.clip(tau, -self.max_torque, self.max_torque)
+        for i, f in enumerate(self.fingers):
+            pb.setJointMotorControlArray(f, (0, 1), pb.TORQUE_CONTROL,
+                                         forces=(float(tau[2 * i]), float(tau[2 * i + 1])),
+                                         physicsClientId=cid)
+        pb.stepSimulation(physicsClientId=cid)
+        self._steps += 1
+
+    def step_raw(self, n: int) -> None:
+        """``n`` bare ``stepSimulation`` calls with no torque update (benchmark reference)."""
+        for _ in range(n):
+            pb.stepSimulation(physicsClientId=self._cid)
+
+    def close(self) -> None:
+        if self._cid is not None and pb.isConnected(self._cid):
+            pb.disconnect(self._cid)
+        self._cid = None
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):  # interpreter shutdown
+            self.close()
+
+    @property
+    def client(self) -> int:
+        return self._cid
+
+
+def _finger_text(hand: HandConfig) -> str:
+    return finger_urdf(tuple(hand.link_lengths_m), tuple(hand.link_masses_kg),
+                       hand.link_radius_m, hand.tip_mass_kg, hand.tip_radius_m,
+                       tuple(hand.joint_lower_rad), tuple(hand.joint_upper_rad),
+                       hand.max_torque_nm)
+
+
+def wrap_angle(a: float) -> float:
+    """Angle in [-pi, pi)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi

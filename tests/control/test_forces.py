@@ -1,0 +1,204 @@
+"""Grasp matrix and contact-force distribution: statics identities and posture feasibility."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from inhand_exp.config import HandConfig, ObjectConfig, SimConfig
+from inhand_exp.control.forces import Squeeze, solve_lp
+from inhand_exp.control.grasp import Contacts, Face, Posture, contact_frames, grasp_matrix
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.repose import Gains
+
+B, T = Face.BOTTOM, Face.TOP
+G_ACC = SimConfig().gravity_mps2
+OBJ = ObjectConfig()
+GAINS = Gains()
+MODEL = HandModel.from_config(HandConfig(), OBJ, G_ACC)
+MU = MODEL.mu * GAINS.friction_margin
+F_MIN, F_MAX = GAINS.f_min, GAINS.f_max
+GRAVITY_WRENCH = np.array([0.0, OBJ.mass_kg * G_ACC, 0.0])  # what the contacts must supply
+BEND = Contacts(Posture((B, T, B)), (-0.12, 0.0, 0.12))
+
+
+def _g(contacts: Contacts, theta: float = 0.0) -> np.ndarray:
+    """G in the object frame (COM at the origin) for the active contacts."""
+    pts, nrm = contact_frames(MODEL.shape, contacts, np.array([0.0, 0.0, theta]))
+    keep = list(contacts.active)
+    return grasp_matrix(pts[keep], nrm[keep])
+
+
+def _check_lam(G: np.ndarray, lam: np.ndarray, w: np.ndarray, f_max: float = F_MAX,
+               f_min: float = F_MIN) -> None:
+    fn, ft = lam[0::2], lam[1::2]
+    np.testing.assert_allclose(G @ lam, w, rtol=0, atol=1e-9)
+    assert np.all(fn >= f_min - 1e-9), fn
+    assert np.all(fn <= f_max + 1e-9), fn
+    assert np.all(np.abs(ft) <= MU * fn + 1e-9), (ft, fn)
+
+
+def test_grasp_matrix_is_sum_of_forces_and_torques():
+    rng = np.random.default_rng(0)
+    for k in (1, 2, 3, 4):
+        for _ in range(20):
+            levers = rng.uniform(-0.3, 0.3, (k, 2))
+            ang = rng.uniform(-np.pi, np.pi, k)
+            normals = np.column_stack([np.cos(ang), np.sin(ang)])
+            lam = rng.uniform(-5.0, 5.0, 2 * k)
+            force, torque = np.zeros(3), 0.0
+            for i in range(k):
+                # in 3D (x, y, z); the tangent is the normal turned +90 deg about -y
+                n3 = np.array([normals[i, 0], 0.0, normals[i, 1]])
+                t3 = np.cross([0.0, -1.0, 0.0], n3)
+                f3 = lam[2 * i] * n3 + lam[2 * i + 1] * t3
+                r3 = np.array([levers[i, 0], 0.0, levers[i, 1]])
+                force += f3
+                torque += -np.cross(r3, f3)[1]  # component about -y: counter-clockwise
+            np.testing.assert_allclose(grasp_matrix(levers, normals) @ lam,
+                                       [force[0], force[2], torque], rtol=0, atol=1e-12)
+
+
+def test_grasp_matrix_tangent_is_ccw_of_normal():
+    G = grasp_matrix(np.array([[0.0, 0.0]]), np.array([[1.0, 0.0]]))
+    np.testing.assert_array_equal(G[:2, 1], [0.0, 1.0])
+
+
+def _random_wrenches(n: int, seed: int, f_scale: float = 3.0, t_scale: float = 0.2):
+    rng = np.random.default_rng(seed)
+    return [np.array([*rng.uniform(-f_scale, f_scale, 2), rng.uniform(-t_scale, t_scale)])
+            for _ in range(n)]
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.4, -1.2])
+def test_bend_grasp_random_wrenches(theta):
+    """Both solvers balance the wrench inside the cones; squeeze never claims more than the LP."""
+    G = _g(BEND, theta)
+    sq = Squeeze.build(G, MU, F_MIN, F_MAX)
+    assert sq.usable
+    feasible = 0
+    for w in _random_wrenches(100, 1):
+        lam_lp = solve_lp(G, w, MU, F_MIN, F_MAX)
+        lam_sq = sq.solve(w)
+        if lam_lp is not None:
+            _check_lam(G, lam_lp, w)
+            feasible += 1
+        if lam_sq is not None:
+            _check_lam(G, lam_sq, w)
+            assert lam_lp is not None  # squeeze is never less conservative than the LP
+            # the LP minimises the total normal force
+            assert lam_lp[0::2].sum() <= lam_sq[0::2].sum() + 1e-7
+        if lam_lp is None:
+            assert lam_sq is None
+    assert feasible >= 90
+
+
+def test_bend_grasp_large_wrenches_agree_on_infeasibility():
+    """Wrenches up to 60 N: some exceed f_max; whenever the LP says no, squeeze says no too."""
+    G = _g(BEND)
+    sq = Squeeze.build(G, MU, F_MIN, F_MAX)
+    outcomes = set()
+    for w in _random_wrenches(200, 2, f_scale=60.0, t_scale=3.0):
+        lam_lp, lam_sq = solve_lp(G, w, MU, F_MIN, F_MAX), sq.solve(w)
+        outcomes.add((lam_lp is None, lam_sq is None))
+        if lam_lp is None:
+            assert lam_sq is None
+        else:
+            _check_lam(G, lam_lp, w)
+        if lam_sq is not None:
+            _check_lam(G, lam_sq, w)
+    assert (True, True) in outcomes and (False, False) in outcomes
+
+
+def _both(contacts: Contacts, w: np.ndarray = GRAVITY_WRENCH, f_min: float = F_MIN):
+    G = _g(contacts)
+    return G, solve_lp(G, w, MU, f_min, F_MAX), Squeeze.build(G, MU, f_min, F_MAX).solve(w)
+
+
+def test_three_point_bend_holds_gravity():
+    G, lam_lp, lam_sq = _both(BEND)
+    assert lam_lp is not None and lam_sq is not None
+    _check_lam(G, lam_lp, GRAVITY_WRENCH)
+    _check_lam(G, lam_sq, GRAVITY_WRENCH)
+
+
+@pytest.mark.parametrize("coords", [(-0.12, 0.0, 0.12), (-0.2, -0.1, 0.2), (-0.12, 0.11, 0.12)])
+def test_lone_finger_between_pair_has_squeeze(coords):
+    _, lam_lp, lam_sq = _both(Contacts(Posture((B, T, B)), coords))
+    assert lam_lp is not None and lam_sq is not None
+
+
+@pytest.mark.parametrize("faces, coords", [
+    ((B, B, T), (-0.12, 0.0, 0.12)),
+    ((T, B, B), (-0.12, 0.0, 0.12)),
+    ((T, T, B), (-0.12, 0.0, 0.12)),
+])
+def test_lone_finger_outside_pair_is_infeasible(faces, coords):
+    G, lam_lp, lam_sq = _both(Contacts(Posture(faces), coords))
+    assert lam_lp is None
+    assert lam_sq is None
+    assert not Squeeze.build(G, MU, F_MIN, F_MAX).usable
+
+
+def test_all_fingers_on_top_is_infeasible():
+    _, lam_lp, lam_sq = _both(Contacts(Posture((T, T, T)), (-0.12, 0.0, 0.12)))
+    assert lam_lp is None and lam_sq is None
+
+
+def test_all_fingers_below_only_rests():
+    """Three fingers below can only support: no internal squeeze exists, and balancing
+    gravity needs 3 f_min <= m g."""
+    contacts = Contacts(Posture((B, B, B)), (-0.12, 0.0, 0.12))
+    G, lam_lp, lam_sq = _both(contacts)
+    assert GRAVITY_WRENCH[1] < 3 * F_MIN
+    assert lam_lp is None and lam_sq is None
+    assert not Squeeze.build(G, MU, F_MIN, F_MAX).usable
+    f_min = GRAVITY_WRENCH[1] / 4
+    G, lam_lp, lam_sq = _both(contacts, f_min=f_min)
+    assert lam_lp is not None
+    _check_lam(G, lam_lp, GRAVITY_WRENCH, f_min=f_min)
+    if lam_sq is not None:  # squeeze may refuse a grasp without internal force, or solve it
+        _check_lam(G, lam_sq, GRAVITY_WRENCH, f_min=f_min)
+    # fingers that can only push up cannot pull the object down
+    G, lam_lp, _ = _both(contacts, w=-GRAVITY_WRENCH, f_min=0.0)
+    assert lam_lp is None
+
+
+@pytest.mark.parametrize("coord", [0.0, 0.01, -0.02])
+def test_pinch_near_com_is_feasible(coord):
+    contacts = Contacts(Posture((B, T, B)), (0.0, coord, 0.0), active=(False, True, True))
+    contacts = contacts.moved(2, coord=coord)
+    G, lam_lp, lam_sq = _both(contacts)
+    assert G.shape == (3, 4)
+    assert lam_lp is not None and lam_sq is not None
+    _check_lam(G, lam_lp, GRAVITY_WRENCH)
+    _check_lam(G, lam_sq, GRAVITY_WRENCH)
+
+
+def test_pinch_far_from_com_needs_large_squeeze():
+    """The gravity torque of a pinch 0.2 m from the COM is carried by the friction couple
+    across the 2 cm width: feasible, but only with normal forces far above the near pinch's."""
+    near = Contacts(Posture((B, T, B)), (0.0, 0.0, 0.0), active=(False, True, True))
+    far = Contacts(Posture((B, T, B)), (0.0, 0.2, 0.2), active=(False, True, True))
+    _, near_lp, _ = _both(near)
+    G, far_lp, far_sq = _both(far)
+    assert near_lp is not None and far_lp is not None and far_sq is not None
+    _check_lam(G, far_sq, GRAVITY_WRENCH)
+    assert far_lp[0::2].sum() > 10 * near_lp[0::2].sum()
+    assert solve_lp(G, GRAVITY_WRENCH, MU, F_MIN, f_max=5.0) is None
+    assert Squeeze.build(G, MU, F_MIN, 5.0).solve(GRAVITY_WRENCH) is None
+
+
+@pytest.mark.parametrize("w", [np.array([0.0, 200.0, 0.0]), np.array([150.0, 0.0, 0.0]),
+                               np.array([0.0, -200.0, 0.0])])
+def test_wrench_beyond_f_max_is_infeasible(w):
+    G = _g(BEND)
+    assert solve_lp(G, w, MU, F_MIN, F_MAX) is None
+    assert Squeeze.build(G, MU, F_MIN, F_MAX).solve(w) is None
+    # the same wrench is fine without the upper bound
+    lam = solve_lp(G, w, MU, F_MIN)
+    assert lam is not None
+    assert lam[0::2].max() > F_MAX
+    lam = Squeeze.build(G, MU, F_MIN).solve(w)
+    assert lam is not None
+    _check_lam(G, lam, w, f_max=np.inf)

@@ -1,0 +1,224 @@
+"""The PyBullet world: integration, planar constraint, torque control, determinism, contacts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as pb
+import pytest
+
+from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
+from inhand_exp.control.grasp import Contacts, Face, Posture
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.repose import Gains, GraspPlan, min_jerk, repose_torques
+from inhand_exp.sim.world import BODY_LINK, TIP_LINK, ObjectSpec, World
+
+SIM, HAND, OBJ = SimConfig(), HandConfig(), ObjectConfig()
+G_ACC = SIM.gravity_mps2
+BEND = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
+POSE = np.array([0.0, 0.2, 0.0])
+FAR = np.array([2.0, 0.2, 0.3])  # object pose well out of the fingers' reach (0.32 m)
+Q_FREE = np.array([0.5, 0.5, 1.5, 0.3, 2.0, -0.5])
+
+
+def _world(obj: ObjectSpec | None = None) -> World:
+    return World(SIM, HAND, obj or ObjectSpec.from_config(OBJ))
+
+
+@pytest.fixture
+def world():
+    w = _world()
+    yield w
+    w.close()
+
+
+@pytest.fixture(scope="module")
+def model() -> HandModel:
+    return HandModel.from_config(HAND, OBJ, G_ACC)
+
+
+def test_free_fall_is_semi_implicit_euler(world):
+    world.reset(FAR, Q_FREE)
+    dt, zs = world.dt, []
+    for _ in range(100):
+        world.step(np.zeros(6))
+        pose, twist = world.object_state()
+        zs.append(pose[1])
+        assert pose[0] == FAR[0] and pose[2] == FAR[2]
+        assert twist[0] == 0.0 and twist[2] == 0.0
+    n = np.arange(1, 101)
+    np.testing.assert_allclose(zs, FAR[1] - G_ACC * dt**2 * n * (n + 1) / 2, rtol=1e-9,
+                               atol=1e-12)
+    np.testing.assert_allclose(world.object_state()[1][1], -G_ACC * dt * 100, rtol=1e-9)
+    assert world.contacts() == []
+
+
+def _assert_planar(world: World) -> None:
+    pose = world.object_pose()
+    pos, orn = pb.getLinkState(world.object, BODY_LINK, computeForwardKinematics=1,
+                               physicsClientId=world.client)[4:6]
+    assert abs(pos[1]) < 1e-9
+    # the link state comes back in single precision: compare in-plane values to 1e-6
+    np.testing.assert_allclose([pos[0], pos[2]], pose[:2], rtol=0, atol=1e-6)
+    assert abs(orn[0]) < 1e-9 and abs(orn[2]) < 1e-9  # a rotation about y only
+    R = np.array(pb.getMatrixFromQuaternion(orn)).reshape(3, 3)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    np.testing.assert_allclose(R[:, 0], [c, 0.0, s], atol=1e-6)  # CCW about -y by theta
+    np.testing.assert_allclose(R[:, 1], [0.0, 1.0, 0.0], atol=1e-9)
+
+
+def test_object_stays_in_plane_under_random_torques(world, model):
+    world.reset(POSE, model.grasp_q(BEND, POSE, press=0.0005))
+    rng = np.random.default_rng(3)
+    moved = 0.0
+    for _ in range(200):
+        world.step(rng.uniform(-0.5, 0.5, 6))
+        _assert_planar(world)
+        moved = max(moved, float(np.abs(world.object_pose() - POSE).max()))
+    assert moved > 0.01  # the fingers really pushed the object around
+
+
+def test_torque_control_initial_acceleration(world, model):
+    world.reset(FAR, Q_FREE)
+    tau = np.array([0.05, -0.02, -0.03, 0.04, 0.02, 0.01])
+    world.step(tau)
+    qd = world.joint_qd()
+    for i, finger in enumerate(model.fingers):
+        q0, t = Q_FREE[2 * i:2 * i + 2], tau[2 * i:2 * i + 2]
+        qdd = np.linalg.solve(finger.mass_matrix(q0), t - finger.gravity_torque(q0))
+        np.testing.assert_allclose(qd[2 * i:2 * i + 2] / world.dt, qdd, rtol=1e-3)
+
+
+def test_torque_is_clipped_to_limit(model):
+    """A command beyond max_torque_nm acts like the limit itself (a small limit keeps the
+    joints below the URDF's 100 rad/s velocity cap, which PyBullet also enforces)."""
+    limit = 0.05
+    w = World(SIM, HandConfig(max_torque_nm=limit), ObjectSpec.from_config(OBJ))
+    try:
+        w.reset(FAR, Q_FREE)
+        cmd = np.array([1.0, -1.0, 0.2, 0.03, -5.0, -0.01])
+        w.step(cmd)
+        qd = w.joint_qd()
+        for i, finger in enumerate(model.fingers):
+            q0, t = Q_FREE[2 * i:2 * i + 2], np.clip(cmd[2 * i:2 * i + 2], -limit, limit)
+            qdd = np.linalg.solve(finger.mass_matrix(q0), t - finger.gravity_torque(q0))
+            np.testing.assert_allclose(qd[2 * i:2 * i + 2] / w.dt, qdd, rtol=1e-3)
+    finally:
+        w.close()
+
+
+def test_deterministic(model):
+    q0 = model.grasp_q(BEND, POSE, press=0.0005)
+    runs = []
+    for _ in range(2):
+        w = _world()
+        w.reset(POSE, q0)
+        rng = np.random.default_rng(7)
+        for _ in range(500):
+            w.step(rng.uniform(-0.3, 0.3, 6))
+        runs.append((*w.object_state(), *w.joint_state()))
+        w.close()
+    for a, b in zip(*runs, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert np.abs(runs[0][0] - POSE).max() > 1e-3  # the run did something
+
+
+def test_hold_contacts_balance_gravity(world, model):
+    q0 = model.grasp_q(BEND, POSE, press=0.0005)
+    world.reset(POSE, q0)
+    gains = Gains()
+    plan = GraspPlan.from_state(model, BEND, POSE, q0, gains)
+
+    def hold(steps: int) -> None:
+        for _ in range(steps):
+            q, qd = world.joint_state()
+            pose, twist = world.object_state()
+            tau = repose_torques(model, plan, gains, q, qd, pose, twist,
+                                 min_jerk(POSE, POSE, 1.0, world.time_s))
+            assert tau is not None
+            world.step(tau)
+
+    def check_normals() -> list:
+        cs = sorted(world.contacts(), key=lambda c: c.finger)
+        assert [c.finger for c in cs] == [0, 1, 2]
+        for c in cs:
+            up = 1.0 if BEND.posture.faces[c.finger] == Face.BOTTOM else -1.0
+            np.testing.assert_allclose(c.normal, [0.0, up], atol=1e-3)
+            assert c.normal_force > 0
+        return cs
+
+    hold(3)
+    check_normals()
+    hold(round(1.0 / world.dt) - 3)
+    cs = check_normals()
+    pose = world.object_pose()
+    np.testing.assert_allclose(pose, POSE, atol=1e-3)  # held still
+    force = sum(c.normal_force * c.normal + c.tangential_force * c.tangent for c in cs)
+    weight = OBJ.mass_kg * G_ACC
+    np.testing.assert_allclose(force, [0.0, weight], rtol=0, atol=0.05 * weight)
+    torque = 0.0
+    for c in cs:
+        (rx, rz), (fx, fz) = c.position - pose[:2], c.normal_force * c.normal + \
+            c.tangential_force * c.tangent
+        torque += rx * fz - rz * fx
+    assert abs(torque) < 0.05 * weight * 0.12
+    # each contact lies on the face of its finger, a tip radius from the tip centre
+    tips = world.tip_positions()
+    for c in cs:
+        np.testing.assert_allclose(c.position, tips[c.finger] + HAND.tip_radius_m * c.normal,
+                                   atol=1e-3)
+
+
+def test_perturbation_scales_simulated_body():
+    spec = ObjectSpec.from_config(OBJ, PerturbConfig(mass_scale=1.1, width_scale=0.5,
+                                                     length_scale=1.1))
+    w = _world(spec)
+    try:
+        info = pb.getDynamicsInfo(w.object, BODY_LINK, physicsClientId=w.client)
+        assert info[0] == pytest.approx(1.1 * OBJ.mass_kg, rel=1e-12)
+        length, width = 1.1 * OBJ.length_m, 0.5 * OBJ.width_m
+        iyy = 1.1 * OBJ.mass_kg * (length**2 + width**2) / 12
+        assert info[2][1] == pytest.approx(iyy, rel=1e-9)
+        (shape,) = pb.getCollisionShapeData(w.object, BODY_LINK, physicsClientId=w.client)
+        assert shape[2] == pb.GEOM_BOX
+        np.testing.assert_allclose(shape[3], [length, OBJ.depth_m, width], rtol=1e-9)
+    finally:
+        w.close()
+
+
+def test_default_object_is_unscaled(world):
+    info = pb.getDynamicsInfo(world.object, BODY_LINK, physicsClientId=world.client)
+    assert info[0] == pytest.approx(OBJ.mass_kg, rel=1e-12)
+    (shape,) = pb.getCollisionShapeData(world.object, BODY_LINK, physicsClientId=world.client)
+    np.testing.assert_allclose(shape[3], [OBJ.length_m, OBJ.depth_m, OBJ.width_m], rtol=1e-9)
+
+
+@pytest.mark.parametrize("link, z", [(0, 0.08), (1, 0.24)])
+def test_finger_links_never_touch_object(link, z):
+    """Finger 1 points straight up; the pole lies across its proximal (z 0-0.16) or distal
+    (z 0.16-0.32) link. The shapes overlap, yet no contact is generated; re-enabling the pair
+    shows the overlap would otherwise produce one."""
+    q = np.array([-1.5, 0.0, np.pi / 2, 0.0, -1.5, 0.0])  # fingers 0 and 2 point down
+    pose = np.array([0.0, z, 0.0])
+    for enable in (0, 1):
+        w = _world()
+        try:
+            w.reset(pose, q)
+            cid, finger = w.client, w.fingers[1]
+            overlap = pb.getClosestPoints(w.object, w.fingers[1], 0.0, BODY_LINK, link,
+                                          physicsClientId=cid)
+            assert overlap and min(p[8] for p in overlap) < -0.01
+            if enable:
+                pb.setCollisionFilterPair(w.object, finger, BODY_LINK, link, 1,
+                                          physicsClientId=cid)
+            w.step(np.zeros(6))
+            pts = pb.getContactPoints(w.object, finger, physicsClientId=cid)
+            links = {p[4] for p in pts}
+            if enable:
+                assert link in links
+            else:
+                assert not links & {0, 1}
+                assert w.contacts() == []
+                assert all(p[4] == TIP_LINK for f in w.fingers
+                           for p in pb.getContactPoints(w.object, f, physicsClientId=cid))
+        finally:
+            w.close()

@@ -113,7 +113,7 @@ class PrimitivesConfig:
     release_land: bool = spec(False, "Offer release / land per finger (cube).")
     repose_duration_s: float = spec(0.5, "Simulated time given to one repose (s).", gt=0)
     slide_duration_s: float = spec(0.5, "Simulated time given to one slide (s).", gt=0)
-    flip_duration_s: float = spec(1.5, "Simulated time given to one flip (s).", gt=0)
+    flip_duration_s: float = spec(2.0, "Simulated time given to one flip (s).", gt=0)
     kp: float = spec(400.0, "Object-pose PD stiffness (1/s^2).", ge=0)
     kd: float = spec(40.0, "Object-pose PD damping (1/s).", ge=0)
     min_normal_force_n: float = spec(0.5, "Least normal force at every held contact (N).", ge=0)

@@ -14,7 +14,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from inhand_exp.control.grasp import Contacts, Face, contact_frames, rotation
+from inhand_exp.control.forces import Squeeze
+from inhand_exp.control.grasp import (
+    Contacts,
+    Face,
+    contact_frames,
+    face_axes,
+    grasp_matrix,
+    rotation,
+)
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
     Gains,
@@ -32,7 +40,12 @@ PHASES = {"unload": 0.12, "travel": 0.55, "touch": 0.1, "load": 0.1}  # rest set
 
 
 class Flip:
-    """Primitive: move ``finger`` to the opposite face, at the same coordinate along the pole."""
+    """Primitive: move ``finger`` to the opposite face.
+
+    It lands at the coordinate nearest its present one where the new grasp holds the object
+    (a strict squeeze preferred, else a grasp that gravity makes feasible) and the path is
+    reachable.
+    """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
                  gains: Gains | None = None, clearance_m: float = 0.025, press_m: float = 0.001,
@@ -69,27 +82,55 @@ class Flip:
             return f"fingers {others} cannot hold the object alone"
         k = self.full.fingers.index(i)
         face = c.posture.faces[i]
-        self.coord = model.shape.coord_of(face, self.full.levers_O[k])
-        self.path = self._waypoints(self.full.tips_O[k], face)
+        self.contacts = model.measured(c, obs.pose, obs.q)
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
-        R = rotation(obs.pose[2])
-        for p in self._dense_path():
-            if model.fingers[i].ik(obs.pose[:2] + R @ p, self.elbow) is None:
-                return f"finger {i} cannot reach round the object's end"
         self.origin = obs.pose.copy()
+        found = self._landing(obs, w_O, self.full.tips_O[k], face)
+        if found is None:
+            return f"no reachable landing on the other face holds the object for finger {i}"
+        self.coord, self.path = found
         self.loaded: GraspPlan | None = None
         return None
+
+    def _landing(self, obs, w_O: np.ndarray, tip_O: np.ndarray, face: Face,
+                 step_m: float = 0.005) -> tuple[float, list[np.ndarray]] | None:
+        """The landing coordinate and its path, nearest the present coordinate first."""
+        model, i = self.model, self.finger
+        new_face = OPPOSITE[face]
+        here = self.contacts.coords[i]
+        limit = model.shape.half_extent(new_face) - 2 * model.tip_radius
+        n = int(limit // step_m)
+        candidates = sorted((k * step_m for k in range(-n, n + 1)), key=lambda c: abs(c - here))
+        R = rotation(obs.pose[2])
+        fallback = None
+        for coord in candidates:
+            result = self.contacts.moved(i, coord=coord, face=new_face)
+            pts, nrm = contact_frames(model.shape, result, np.zeros(3))
+            sq = Squeeze.build(grasp_matrix(pts, nrm), model.mu * self.gains.friction_margin,
+                               self.gains.f_min, self.gains.f_max)
+            if not sq.usable and (fallback is not None or sq.solve(w_O) is None):
+                continue
+            self.coord = coord
+            path = self._waypoints(tip_O, face)
+            if any(model.fingers[i].ik(obs.pose[:2] + R @ p, self.elbow) is None
+                   for p in self._dense_path(path)):
+                continue
+            if sq.usable:
+                return coord, path
+            fallback = (coord, path)
+        return fallback
 
     def _waypoints(self, tip_O: np.ndarray, face: Face) -> list[np.ndarray]:
         """Tip-centre waypoints in the object frame, from the current contact to the new one."""
         shape, r = self.model.shape, self.model.tip_radius
         new_face = OPPOSITE[face]
         lift = r + self.clearance
-        out_old = -contact_frames(shape, Contacts(self.contacts.posture, (0.0,) * 3),
-                                  np.zeros(3))[1][self.finger]
-        out_new = -out_old
-        along = np.array([out_old[1], -out_old[0]])  # along the face
-        end = np.sign(self.coord) or 1.0
+        inward, along = face_axes(face)
+        out_old, out_new = -inward, inward
+        # round the end nearer the finger's base
+        base_x = self.model.fingers[self.finger].base_x
+        ends_x = [self.origin[0] + (rotation(self.origin[2]) @ (e * along))[0] for e in (-1, 1)]
+        end = -1.0 if abs(ends_x[0] - base_x) <= abs(ends_x[1] - base_x) else 1.0
         reach_end = shape.half_extent(face) + lift
         half_depth = abs(shape.local_contact(face, 0.0)[0] @ out_old)
         surface_new, _ = shape.local_contact(new_face, self.coord)
@@ -100,25 +141,31 @@ class Flip:
                 surface_new + out_new * lift,
                 surface_new + out_new * (r - self.press)]
 
-    def _dense_path(self, n: int = 8) -> list[np.ndarray]:
+    @staticmethod
+    def _dense_path(path: list[np.ndarray], n: int = 8) -> list[np.ndarray]:
         pts = []
-        for a, b in zip(self.path, self.path[1:], strict=False):
+        for a, b in zip(path, path[1:], strict=False):
             pts += [a + (b - a) * s for s in np.linspace(0, 1, n)]
         return pts
 
     def _travel_target(self, t: float) -> np.ndarray:
-        """Tip-centre target in the object frame at time ``t``."""
+        """Tip-centre target in the object frame at time ``t``.
+
+        Each straight segment between waypoints is its own minimum-jerk move, with time in
+        proportion to its length, so the tip stops at every corner instead of cutting it.
+        """
         t0, t1 = self.times["travel"][0], self.times["touch"][1]
         if t <= t0:
             return self.path[0]
-        lengths = np.array([np.linalg.norm(b - a) for a, b in zip(self.path, self.path[1:],
-                                                                    strict=False)])
-        s, _, _ = min_jerk(np.zeros(1), np.array([lengths.sum()]), t1 - t0, t - t0)
-        d = float(s[0])
+        lengths = [float(np.linalg.norm(b - a)) for a, b in zip(self.path, self.path[1:],
+                                                                 strict=False)]
+        total = sum(lengths) or 1.0
+        elapsed = t - t0
         for a, b, seg in zip(self.path, self.path[1:], lengths, strict=False):
-            if d <= seg or seg == lengths[-1]:
-                return a + (b - a) * min(d / seg, 1.0) if seg > 0 else b
-            d -= seg
+            span = (t1 - t0) * seg / total
+            if elapsed <= span:
+                return min_jerk(a, b, span, elapsed)[0]
+            elapsed -= span
         return self.path[-1]
 
     def torques(self, obs) -> np.ndarray | None:

@@ -8,7 +8,7 @@ import numpy as np
 
 from inhand_exp.config import HandConfig, ObjectConfig
 from inhand_exp.control.finger import FingerModel
-from inhand_exp.control.grasp import BoxShape, Contacts, contact_frames
+from inhand_exp.control.grasp import BoxShape, Contacts, contact_frames, rotation
 
 # Elbow branch per finger for inverse kinematics: the outer fingers bend inwards, which lets
 # them reach round the ends of the object.
@@ -76,3 +76,11 @@ class HandModel:
     def tips(self, q: np.ndarray) -> np.ndarray:
         """Fingertip centres (3, 2) from joint angles (6,)."""
         return np.array([f.tip(q[2 * i:2 * i + 2]) for i, f in enumerate(self.fingers)])
+
+    def measured(self, contacts: Contacts, pose: np.ndarray, q: np.ndarray) -> Contacts:
+        """``contacts`` with each coordinate taken from the measured tip and the given pose."""
+        R = rotation(pose[2])
+        tips_O = (self.tips(q) - pose[:2]) @ R  # rows: R^T (tip - p)
+        coords = tuple(self.shape.coord_of(f, t) for f, t in zip(contacts.posture.faces, tips_O,
+                                                                 strict=True))
+        return Contacts(contacts.posture, coords, contacts.active)

@@ -40,7 +40,7 @@ def git_state(path: Path) -> dict[str, Any] | None:
 
 def run_config_message(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> dict[str, Any]:
     """The ``/run/config`` message: everything needed to reproduce the run."""
-    return {
+    message = {
         "config": OmegaConf.to_container(cfg, resolve=True, enum_to_str=True),
         "versions": package_versions(),
         "seed": int(cfg.seed),
@@ -48,5 +48,8 @@ def run_config_message(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> 
         "overrides": list(overrides),
         "run_dir": str(run_dir),
         "started_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-        "git": git_state(Path(__file__).resolve().parent),
     }
+    git = git_state(Path(__file__).resolve().parent)
+    if git is not None:  # omitted outside a checkout: the schema has no null types
+        message["git"] = git
+    return message

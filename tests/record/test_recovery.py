@@ -172,7 +172,8 @@ def test_sigkilled_writer_leaves_a_gap_free_prefix(tmp_path: Path) -> None:
             time.sleep(0.0002)
     """)
     src = str(Path(inhand_exp.__file__).resolve().parents[1])
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([src, os.environ.get("PYTHONPATH", "")])}
+    paths = [src, *filter(None, [os.environ.get("PYTHONPATH")])]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
     proc = subprocess.Popen([sys.executable, "-c", script, str(path)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
     try:
@@ -239,6 +240,23 @@ def test_damaged_length_field_resyncs_at_the_next_chunk(
     assert any(f"byte {victim.start}" in p for p in log.problems), log.problems
 
 
+@pytest.mark.parametrize("truncate", [False, True])
+def test_damaged_header_length_goes_back_to_the_first_chunk(
+    zstd_log: Written, tmp_path: Path, truncate: bool
+) -> None:
+    """A plausible but wrong length in an unchecked record jumps mid-file; nothing is lost."""
+    w = zstd_log
+    wrong = w.chunks[5].start + 40 - 8 - 9  # from the header at byte 8 into chunk 5's payload
+    path = damaged_copy(w, tmp_path, {9: struct.pack("<Q", wrong)})
+    if truncate:
+        path.write_bytes(path.read_bytes()[:w.chunks[-1].end])
+    log = read_log(path)
+    assert ids(log) == list(range(N_MESSAGES))
+    assert log.topic("/run/config") == [{"config": {}, "versions": {}, "seed": 0}]
+    assert log.corrupt_chunks == 0 and log.truncated == truncate
+    assert any("went back" in p for p in log.problems), log.problems
+
+
 def test_damaged_opcode_resyncs_at_the_next_chunk(zstd_log: Written, tmp_path: Path) -> None:
     w = zstd_log
     victim = w.chunks[2]
@@ -266,10 +284,11 @@ def test_any_single_flipped_byte_never_yields_wrong_data(
     for at in range(8, len(w.data), len(w.data) // 97):  # skip the leading magic
         log = read_log(damaged_copy(w, tmp_path, flipped(w, at)))
         assert_only_written_data(log, w)
+        assert log.corrupt_chunks <= 1, (at, log.problems)
+        lost = set(range(N_MESSAGES)) - set(ids(log))
         hit = [c for c in w.chunks if c.start <= at < c.end]
-        if hit and hit[0] is not w.chunks[0]:  # a chunk's own bytes: at most it is lost
-            lost = set(range(N_MESSAGES)) - set(ids(log))
-            assert lost <= set(hit[0].ids), f"flip at byte {at} lost {sorted(lost)[:5]}..."
+        assert lost <= set(hit[0].ids if hit else ()), f"flip at byte {at} lost {sorted(lost)}"
+        assert not lost or (log.corrupt_chunks == 1 and log.problems), (at, log.problems)
 
 
 # --- not a log -----------------------------------------------------------------------------

@@ -211,7 +211,7 @@ def test_missing_required_key_is_named(tmp_path: Path) -> None:
 def test_rejected_messages_leave_nothing_behind(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
     with RunLog(path) as log:
-        with pytest.raises(TypeError, match="object"):
+        with pytest.raises(TypeError, match="/train/iteration message: .*object"):
             log.write("/train/iteration", {"iteration": 0, "frames": 0, "losses": object()})
         with pytest.raises(ValueError):
             log.write("/train/iteration", {"iteration": 0})
@@ -260,3 +260,10 @@ def test_flush_policy_bounds_what_a_kill_loses(tmp_path: Path) -> None:
         assert on_disk.truncated and len(on_disk.messages) == 2
         lazy.flush()
         assert len(read_log(lazy_path).messages) == 2
+
+
+def test_json_decoder_factory_only_claims_json() -> None:
+    factory = JsonDecoderFactory()
+    decode = factory.decoder_for("json", None)
+    assert decode is not None and decode(b'{"a": [1, null]}') == {"a": [1, None]}
+    assert factory.decoder_for("cdr", None) is None

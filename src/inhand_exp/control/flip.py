@@ -42,9 +42,9 @@ PHASES = {"unload": 0.12, "travel": 0.55, "touch": 0.1, "load": 0.1}  # rest set
 class Flip:
     """Primitive: move ``finger`` to the opposite face.
 
-    It lands at the coordinate nearest its present one where the new grasp holds the object
-    (a strict squeeze preferred, else a grasp that gravity makes feasible) and the path is
-    reachable.
+    It lands at the coordinate nearest its present one where the new grasp admits a squeeze
+    strictly inside the friction cones (a grasp that only gravity makes feasible proved fragile
+    while the force is handed over) and where the whole path is reachable.
     """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
@@ -85,14 +85,14 @@ class Flip:
         self.contacts = model.measured(c, obs.pose, obs.q)
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
         self.origin = obs.pose.copy()
-        found = self._landing(obs, w_O, self.full.tips_O[k], face)
+        found = self._landing(obs, self.full.tips_O[k], face)
         if found is None:
             return f"no reachable landing on the other face holds the object for finger {i}"
         self.coord, self.path = found
         self.loaded: GraspPlan | None = None
         return None
 
-    def _landing(self, obs, w_O: np.ndarray, tip_O: np.ndarray, face: Face,
+    def _landing(self, obs, tip_O: np.ndarray, face: Face,
                  step_m: float = 0.005) -> tuple[float, list[np.ndarray]] | None:
         """The landing coordinate and its path, nearest the present coordinate first."""
         model, i = self.model, self.finger
@@ -102,23 +102,19 @@ class Flip:
         n = int(limit // step_m)
         candidates = sorted((k * step_m for k in range(-n, n + 1)), key=lambda c: abs(c - here))
         R = rotation(obs.pose[2])
-        fallback = None
         for coord in candidates:
             result = self.contacts.moved(i, coord=coord, face=new_face)
             pts, nrm = contact_frames(model.shape, result, np.zeros(3))
             sq = Squeeze.build(grasp_matrix(pts, nrm), model.mu * self.gains.friction_margin,
                                self.gains.f_min, self.gains.f_max)
-            if not sq.usable and (fallback is not None or sq.solve(w_O) is None):
+            if not sq.usable:
                 continue
             self.coord = coord
             path = self._waypoints(tip_O, face)
-            if any(model.fingers[i].ik(obs.pose[:2] + R @ p, self.elbow) is None
+            if all(model.fingers[i].ik(obs.pose[:2] + R @ p, self.elbow) is not None
                    for p in self._dense_path(path)):
-                continue
-            if sq.usable:
                 return coord, path
-            fallback = (coord, path)
-        return fallback
+        return None
 
     def _waypoints(self, tip_O: np.ndarray, face: Face) -> list[np.ndarray]:
         """Tip-centre waypoints in the object frame, from the current contact to the new one."""
@@ -186,14 +182,17 @@ class Flip:
                                                    self.gains)
             s = min(1.0, (t - ld0) / (ld1 - ld0))
             mix = [(self.pair, 1 - s), (self.loaded, s)]
+        # A blend of two feasible solutions is feasible (the cones are convex); where one plan
+        # has no solution for this wrench, the other carries the whole load alone.
+        solved = [(plan, weight, plan.squeeze.solve(w_O)) for plan, weight in mix if weight > 0]
+        solved = [(p, w, lam) for p, w, lam in solved if lam is not None]
+        if not solved:
+            return None
+        total = sum(w for _, w, _ in solved)
         force = {j: np.zeros(2) for j in range(3)}
         normal = {}
-        for plan, weight in mix:
-            if weight <= 0:
-                continue
-            lam = plan.squeeze.solve(w_O)
-            if lam is None:
-                return None
+        for plan, weight, lam in solved:
+            weight /= total
             for k, j in enumerate(plan.fingers):
                 force[j] += weight * contact_force(plan, lam, k, R)
                 normal[j] = R @ plan.normals_O[k]

@@ -11,7 +11,9 @@
   satisfies every constraint: a one-dimensional LP with a closed-form answer, cheap enough for
   the torque loop. Where no strict squeeze exists (e.g. two fingers on one side and a third
   that only slides), each step solves the full LP for its wrench instead, which may still be
-  feasible thanks to gravity; infeasible when that LP is.
+  feasible thanks to gravity; infeasible when that LP is. A plan may also ask for the LP at
+  every step with its own cost (a sliding finger that should press as lightly as it can: its
+  kinetic friction grows with its normal force, so it must not join the squeeze).
 """
 
 from __future__ import annotations
@@ -63,11 +65,17 @@ class Squeeze:
     mu: float
     f_min: float
     f_max: float
+    cost: np.ndarray | None = None  # per free variable: always solve the LP with this cost
 
     @classmethod
     def build(cls, G: np.ndarray, mu: float, f_min: float, f_max: float = np.inf,
-              coupled: dict[int, float] | None = None) -> Squeeze:
-        """Find the internal force deepest inside the cones (LP), normalised to sum f_n = 1."""
+              coupled: dict[int, float] | None = None,
+              light: tuple[int, ...] = ()) -> Squeeze:
+        """Find the internal force deepest inside the cones (LP), normalised to sum f_n = 1.
+
+        Contacts in ``light`` switch the plan to a per-step LP whose cost weighs their normal
+        force ten times.
+        """
         k = G.shape[1] // 2
         coupled = coupled or {}
         cols = [c for i in range(k) for c in ((2 * i,) if i in coupled else (2 * i, 2 * i + 1))]
@@ -100,8 +108,13 @@ class Squeeze:
                       b_eq=np.array([0.0, 0.0, 0.0, 1.0]),
                       bounds=[(None, None)] * m + [(None, 1.0)], method="highs")
         lam0, margin = (res.x[:m], float(res.x[m])) if res.status == 0 else (np.zeros(m), 0.0)
+        cost = None
+        if light:
+            cost = np.zeros(m)
+            cost[fn] = 1.0
+            cost[[pos[2 * i] for i in light]] = 10.0
         return cls(np.linalg.pinv(Gr), lam0, margin, np.array(cols), tied, Gr, fn, fric, 2 * k,
-                   mu, f_min, f_max)
+                   mu, f_min, f_max, cost)
 
     @property
     def usable(self) -> bool:
@@ -110,7 +123,7 @@ class Squeeze:
 
     def solve(self, w: np.ndarray) -> np.ndarray | None:
         """Forces ``lam`` (2k,) balancing wrench ``w`` (same frame as ``G``), or None."""
-        red = self._closed_form(w) if self.usable else self._lp(w)
+        red = self._closed_form(w) if self.usable and self.cost is None else self._lp(w)
         if red is None:
             return None
         lam = np.zeros(self.size)
@@ -127,8 +140,11 @@ class Squeeze:
                 r = np.zeros(m)
                 r[a], r[b] = -self.mu, sign
                 rows.append(r)
-        cost = np.zeros(m)
-        cost[self.fn] = 1.0
+        if self.cost is None:
+            cost = np.zeros(m)
+            cost[self.fn] = 1.0
+        else:
+            cost = self.cost
         bounds = [(None, None)] * m
         for a in self.fn:
             bounds[a] = (self.f_min, None if np.isinf(self.f_max) else self.f_max)

@@ -63,7 +63,7 @@ class GraspPlan:
         G = grasp_matrix(levers_O, normals_O)
         coupled = {k: drag for k, i in enumerate(fingers) if i == sliding}
         sq = Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min, gains.f_max,
-                           coupled)
+                           coupled, light=tuple(coupled))
         return cls(fingers, levers_O, normals_O, tips_O, sq)
 
 
@@ -175,6 +175,11 @@ class Repose:
             return "no contact forces inside the friction cones hold the object here"
         self.origin = obs.pose.copy()
         self.goal = self.origin + self.delta
+        R = rotation(self.goal[2])
+        for k, i in enumerate(self.plan.fingers):
+            tip = self.goal[:2] + R @ self.plan.tips_O[k]
+            if self.model.fingers[i].ik(tip, 1 if obs.q[2 * i + 1] >= 0 else -1) is None:
+                return f"finger {i} cannot follow the object to the target pose"
         return None
 
     def torques(self, obs) -> np.ndarray | None:

@@ -1,7 +1,8 @@
 """Slide (paper eq. 6): one fingertip moves along its face while the other two hold the object.
 
-The sliding finger follows an inverse-kinematics target that moves along the face (in the
-object frame, mapped through the observed pose) with joint-space inverse dynamics. While it
+The sliding finger's tip follows a target that moves along the face (in the object frame,
+mapped through the observed pose) by inverse dynamics: a PD along the face, while across it the
+tip moves with the object and the planned normal force does the pressing. While it
 moves, its contact force lies on the edge of the friction cone (kinetic friction dragging the
 object along): the force distribution plans for that drag, so the other two fingers hold the
 object against it and the sliding finger's torques push through it. The object is held at its
@@ -38,12 +39,14 @@ class Slide:
     """Primitive: move ``finger``'s contact by ``dc`` metres along its face."""
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, dc: float,
-                 duration_s: float, gains: Gains | None = None, kp_joint: float = 900.0,
-                 kd_joint: float = 60.0, press_m: float = 0.001, move_fraction: float = 0.7):
+                 duration_s: float, gains: Gains | None = None, kp: float = 900.0,
+                 kd: float = 60.0, move_fraction: float = 0.7,
+                 max_push_n: float = 1.5):
         self.model, self.contacts, self.finger, self.dc = model, contacts, finger, dc
         self.duration_s, self.gains = duration_s, gains or Gains()
-        self.kp, self.kd, self.press = kp_joint, kd_joint, press_m
+        self.kp, self.kd = kp, kd
         self.move_s = move_fraction * duration_s
+        self.max_push = max_push_n
 
     def start(self, obs) -> str | None:
         model, c, i = self.model, self.contacts, self.finger
@@ -58,9 +61,13 @@ class Slide:
         self.rest = GraspPlan.from_state(model, c, obs.pose, obs.q, self.gains, sliding=i)
         _, w_O = object_wrench(model, self.gains, obs.pose, np.zeros(3),
                                (obs.pose, np.zeros(3), np.zeros(3)))
-        if self.plan.squeeze.solve(w_O) is None or self.rest.squeeze.solve(w_O) is None:
+        lam = self.plan.squeeze.solve(w_O)
+        if lam is None or self.rest.squeeze.solve(w_O) is None:
             return f"the other fingers cannot hold the object while finger {i} slides"
         k = self.plan.fingers.index(i)
+        if lam[2 * k] > self.max_push:
+            return (f"finger {i} would have to press with {lam[2 * k]:.2f} N to slide: its "
+                    f"friction would drag the object")
         self.c0 = model.shape.coord_of(face, self.plan.levers_O[k])
         self.c1 = self.c0 + self.dc
         limit = model.shape.half_extent(face) - model.tip_radius
@@ -85,26 +92,36 @@ class Slide:
         for k, j in enumerate(plan.fingers):
             f_W, n_W = contact_force(plan, lam, k, R), R @ plan.normals_O[k]
             if j == i:
-                qdd = self._slide_qdd(obs, R)
+                qdd = self._slide_qdd(obs, R, acc)
             else:
                 qdd = follow_qdd(model, j, obs.q, obs.qd, plan.tips_O[k], acc, obs.twist[2], R)
             tau[2 * j:2 * j + 2] = push_torque(model, j, obs.q, obs.qd, qdd, f_W, n_W)
         return tau
 
-    def _slide_qdd(self, obs, R: np.ndarray) -> np.ndarray:
-        """Joint-space PD towards the IK solution of the moving tip target."""
+    def _slide_qdd(self, obs, R: np.ndarray, acc: np.ndarray) -> np.ndarray:
+        """Inverse dynamics towards the moving target: stiff along the face, force across it.
+
+        Along the face the tip tracks the minimum-jerk target with a PD; across it, the tip
+        moves with the object (as a holding finger does) and the planned normal force presses.
+        """
         model, i = self.model, self.finger
         finger = model.fingers[i]
-        c, cd, _ = min_jerk(np.array([self.c0]), np.array([self.c1]), self.move_s, obs.t)
-        face = self.contacts.posture.faces[i]
-        surface_O, _ = model.shape.local_contact(face, float(c[0]))
-        target_O = surface_O - (model.tip_radius - self.press) * self.n_O
-        target_W = obs.pose[:2] + R @ target_O
+        c, cd, cdd = min_jerk(np.array([self.c0]), np.array([self.c1]), self.move_s, obs.t)
+        along_W = R @ self.along_O
+        surface_O, _ = model.shape.local_contact(self.contacts.posture.faces[i], float(c[0]))
+        target_W = obs.pose[:2] + R @ (surface_O - model.tip_radius * self.n_O)
         qi, qdi = obs.q[2 * i:2 * i + 2], obs.qd[2 * i:2 * i + 2]
-        q_ref = finger.ik(target_W, self.elbow)
-        if q_ref is None:
-            q_ref = qi
-        J = finger.jacobian(q_ref)
-        qd_ref = np.linalg.solve(J, R @ self.along_O * float(cd[0])) \
-            if abs(np.linalg.det(J)) > 1e-6 else np.zeros(2)
-        return self.kp * (q_ref - qi) + self.kd * (qd_ref - qdi)
+        J = finger.jacobian(qi)
+        tip, v_tip = finger.tip(qi), J @ qdi
+        r = tip - obs.pose[:2]
+        omega = obs.twist[2]
+        v_obj = obs.twist[:2] + omega * np.array([-r[1], r[0]])  # object point at the tip
+        a_obj = acc[:2] + acc[2] * np.array([-r[1], r[0]]) - omega**2 * r
+        e_t = float(along_W @ (target_W - tip))
+        ed_t = float(cd[0]) - float(along_W @ (v_tip - v_obj))
+        a_tip = a_obj + along_W * (float(cdd[0]) + self.kp * e_t + self.kd * ed_t)
+        return _solve(J, a_tip - finger.jacobian_dot_qd(qi, qdi))
+
+
+def _solve(J: np.ndarray, b: np.ndarray, damping: float = 1e-4) -> np.ndarray:
+    return J.T @ np.linalg.solve(J @ J.T + damping * np.eye(2), b)

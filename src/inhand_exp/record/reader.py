@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import io
 import json
+import os
 import struct
 import zlib
 from collections import Counter
@@ -30,6 +31,7 @@ DEFAULT_RECORD_SIZE_LIMIT = 1 << 30  # bytes; no record or uncompressed chunk ma
 _HEADER = struct.Struct("<BQ")  # record opcode and body length
 _FOOTER_SIZE = _HEADER.size + 20  # footer record: summary_start, summary_offset_start, crc
 _KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
+_CHUNK_OPCODE = bytes([Opcode.CHUNK])
 # Everything that damaged or cut bytes can make parsing raise; never shown to the caller.
 _DECODE_ERRORS = (McapError, ValueError, struct.error, zstandard.ZstdError, RuntimeError,
                   OverflowError, IndexError, MemoryError)
@@ -55,7 +57,8 @@ class Log:
 
     ``messages`` are in file (= write) order. ``truncated``: the file has no footer, i.e. the
     writer never closed it (killed, crashed, still running). ``corrupt_chunks``: chunks whose
-    bytes were damaged (CRC mismatch, undecodable), so their messages were left out.
+    bytes were damaged (CRC mismatch, undecodable, unframeable), so their messages were left
+    out. ``problems``: one human-readable line per thing found wrong, with its byte offset.
     """
 
     path: Path
@@ -94,11 +97,17 @@ class _StrictStream(ReadDataStream):
         return data
 
 
+def _why(err: BaseException) -> str:
+    return str(err) or type(err).__name__
+
+
 def _parse(reader: Callable[[ReadDataStream], McapRecord], body: bytes) -> McapRecord:
     return reader(_StrictStream(io.BytesIO(body)))
 
 
-def read_log(path: str | Path, *, record_size_limit: int = DEFAULT_RECORD_SIZE_LIMIT) -> Log:
+def read_log(
+    path: str | os.PathLike[str], *, record_size_limit: int = DEFAULT_RECORD_SIZE_LIMIT
+) -> Log:
     """Read every intact message of the run log at ``path``.
 
     A file without footer (writer killed) gives the messages of every chunk completed before
@@ -124,11 +133,11 @@ class _Reader:
         self.buf = buf
         self.limit = record_size_limit
         self.log = Log(path)
-        self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.raw: list[Message] = []
-        self.good_chunks: set[int] = set()  # offsets of chunks whose messages were kept
+        self.good_chunks: dict[int, int] = {}  # offset -> body bytes used, chunks kept
         self.bad_chunks: set[int] = set()  # offsets of chunk records found damaged
+        self.top_level_seen: set[int] = set()  # offsets of records outside chunks, read once
         self.lost_regions = 0  # stretches of broken framing skipped to the next good chunk
         self.unverified_chunks = 0
 
@@ -151,17 +160,21 @@ class _Reader:
         if footer is None:
             self.problem(f"file ends at byte {len(buf)} without a footer: the log was not "
                          "closed (writer killed, crashed or still running)")
-        data_end = len(buf)
-        if footer is not None:
-            data_end = footer_at
-            if 0 < footer.summary_start <= footer_at:
-                data_end = footer.summary_start
-        self.scan(len(MCAP0_MAGIC), data_end, complete=footer is not None)
+        summary_ok = footer is not None and self.summary_intact(footer_at, footer)
+        # The data section ends at its DATA_END record, before the summary and the footer.
+        self.scan(len(MCAP0_MAGIC), footer_at if footer is not None else len(buf),
+                  complete=footer is not None)
         chunk_offsets: set[int] | None = None
-        if footer is not None and footer.summary_start:
+        if summary_ok and footer is not None and footer.summary_start:
             chunk_offsets = self.read_summary(footer_at, footer)
         if chunk_offsets is not None:  # exact: every indexed chunk not read back is corrupt
-            log.corrupt_chunks = len(chunk_offsets - self.good_chunks)
+            missing = chunk_offsets - self.good_chunks.keys()
+            log.corrupt_chunks = len(missing)
+            unnoticed = sorted(missing - self.bad_chunks)
+            if unnoticed:
+                self.problem(f"{len(unnoticed)} chunk(s) the summary lists were not found intact "
+                             f"(at byte {', '.join(map(str, unnoticed))}); their messages "
+                             "were dropped")
         else:
             log.corrupt_chunks = len(self.bad_chunks) + self.lost_regions
         if self.unverified_chunks:
@@ -179,46 +192,69 @@ class _Reader:
         opcode, length = _HEADER.unpack_from(buf, at)
         if opcode != Opcode.FOOTER or length != _FOOTER_SIZE - _HEADER.size:
             return at, None
-        footer = Footer.read(ReadDataStream(io.BytesIO(buf[at + _HEADER.size:])))
-        if footer.summary_start > at or footer.summary_offset_start > at:
-            self.problem(f"footer at byte {at} points past itself; ignoring it")
-            return at, None
-        return at, footer
+        return at, Footer.read(ReadDataStream(io.BytesIO(buf[at + _HEADER.size:])))
+
+    def summary_intact(self, footer_at: int, footer: Footer) -> bool:
+        """Whether the footer's pointers and the summary section pass the footer's CRC."""
+        start = footer.summary_start or footer_at
+        if not len(MCAP0_MAGIC) <= start <= footer_at or footer.summary_offset_start > footer_at:
+            self.problem(f"footer at byte {footer_at} is damaged (points outside the file); "
+                         "ignored the summary")
+            return False
+        if footer.summary_crc == 0:  # written without CRCs: pointers are plausible, use them
+            return True
+        crc = zlib.crc32(self.buf[start:footer_at + _HEADER.size + 16])
+        if crc != footer.summary_crc:
+            self.problem(f"summary section (bytes {start} to {footer_at + _FOOTER_SIZE}) is "
+                         "damaged (CRC mismatch); ignored it")
+            return False
+        return True
 
     def scan(self, pos: int, end: int, *, complete: bool) -> None:
-        """Process records in ``[pos, end)``; past broken framing, resume at the next chunk."""
+        """Process records in ``[pos, end)``; past broken framing, resume at the next chunk.
+
+        Only CRC-checked chunks vouch for the framing: after a damaged record, the search for
+        the next intact chunk starts where the last intact chunk ended, as the length of any
+        record since then may have sent the scan astray.
+        """
         buf = self.buf
+        trusted = pos  # end of the last intact chunk
         while pos < end:
             reason, cut = self.framing_problem(pos, end)
             if reason is not None:
-                found = self.next_chunk(pos + 1, end)
+                found = self.next_chunk(trusted, end)
                 if found is None:
                     self.stop(pos, end, reason, complete=complete, cut=cut)
                     return
-                self.lost_regions += 1
-                self.problem(f"byte {pos}: {reason}; skipped {found - pos} bytes to the next "
-                             f"intact chunk at byte {found}")
+                if found > pos:
+                    self.lost_regions += 1
+                    self.problem(f"byte {pos}: {reason}; skipped {found - pos} bytes to the "
+                                 f"next intact chunk at byte {found}")
+                else:
+                    self.problem(f"byte {pos}: {reason}; went back to the intact chunk at "
+                                 f"byte {found}")
                 pos = found
                 continue
             opcode, length = _HEADER.unpack_from(buf, pos)
             body_at = pos + _HEADER.size
             body, next_at = buf[body_at:body_at + length], body_at + length
             if opcode == Opcode.CHUNK:
-                error = self.chunk(pos, body)
-                if error is not None:
+                used = self.chunk(pos, body)
+                if isinstance(used, str):
                     self.bad_chunks.add(pos)
-                    self.problem(f"chunk at byte {pos}: {error}; its messages were dropped")
-                    # Its length field may be damaged too: trust only the next intact chunk.
-                    found = self.next_chunk(pos + 1, end)
+                    self.problem(f"chunk at byte {pos}: {used}; its messages were dropped")
+                    found = self.next_chunk(trusted, end)  # its length may be damaged too
                     if found is None:
                         return
                     next_at = found
+                else:
+                    trusted = body_at + used
             elif opcode == Opcode.DATA_END:
                 return
             elif opcode == Opcode.FOOTER:
                 self.problem(f"byte {pos}: footer inside the data section; stopped there")
                 return
-            elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+            elif opcode in (Opcode.CHANNEL, Opcode.MESSAGE):
                 self.top_level(pos, opcode, body)
             pos = next_at
 
@@ -252,7 +288,7 @@ class _Reader:
     def next_chunk(self, start: int, end: int) -> int | None:
         """Offset of the first chunk record in ``[start, end)`` that parses and passes its CRC."""
         buf = self.buf
-        at = buf.find(Opcode.CHUNK.to_bytes(1, "little"), start, end)
+        at = buf.find(_CHUNK_OPCODE, start, end)
         while at != -1:
             reason, _ = self.framing_problem(at, end)
             if reason is None:
@@ -260,34 +296,38 @@ class _Reader:
                 body = buf[at + _HEADER.size:at + _HEADER.size + length]
                 if not isinstance(self.unpack_chunk(body, require_crc=True), str):
                     return at
-            at = buf.find(Opcode.CHUNK.to_bytes(1, "little"), at + 1, end)
+            at = buf.find(_CHUNK_OPCODE, at + 1, end)
         return None
 
     # --- records --------------------------------------------------------------------------
 
-    def chunk(self, pos: int, body: bytes) -> str | None:
-        """Keep the records of the chunk at ``pos``; on damage return what was wrong."""
+    def chunk(self, pos: int, body: bytes) -> int | str:
+        """Keep the records of the chunk at ``pos`` and return the body bytes it used, or
+        return what was wrong with it."""
+        if pos in self.good_chunks:  # never keep a chunk's messages twice
+            return self.good_chunks[pos]
         unpacked = self.unpack_chunk(body, require_crc=False)
         if isinstance(unpacked, str):
             return unpacked
-        records, verified = unpacked
+        records, verified, used = unpacked
         self.unverified_chunks += not verified
-        self.good_chunks.add(pos)
+        self.good_chunks[pos] = used
         for record in records:
             if isinstance(record, Message):
                 self.raw.append(record)
-            elif isinstance(record, Schema):
-                self.schemas.setdefault(record.id, record)
             elif isinstance(record, Channel):
                 self.channels.setdefault(record.id, record)
-        return None
+        return used
 
-    def unpack_chunk(self, body: bytes, *, require_crc: bool) -> tuple[list[Any], bool] | str:
-        """(records, CRC-checked) inside a chunk record's body, or why it cannot be read."""
+    def unpack_chunk(
+        self, body: bytes, *, require_crc: bool
+    ) -> tuple[list[Any], bool, int] | str:
+        """(records, CRC-checked, body bytes used) of a chunk record, or why it is unreadable."""
         try:
             chunk = _parse(Chunk.read, body)
         except _DECODE_ERRORS as err:
-            return f"unreadable chunk header ({err or type(err).__name__})"
+            return f"unreadable chunk header ({_why(err)})"
+        used = 8 + 8 + 8 + 4 + 4 + len(chunk.compression.encode()) + 8 + len(chunk.data)
         if chunk.uncompressed_size > self.limit:
             return f"claims {chunk.uncompressed_size} bytes uncompressed (limit {self.limit})"
         verified = chunk.uncompressed_crc != 0
@@ -311,8 +351,8 @@ class _Reader:
         except CRCValidationError as err:
             return f"CRC mismatch (expected {err.expected:#010x}, computed {err.actual:#010x})"
         except _DECODE_ERRORS as err:
-            return f"cannot decode {kind} data ({err or type(err).__name__})"
-        return records, verified
+            return f"cannot decode {kind} data ({_why(err)})"
+        return records, verified, used
 
     @staticmethod
     def inflate_lz4(chunk: Chunk) -> Chunk:
@@ -327,51 +367,44 @@ class _Reader:
                      uncompressed_size=chunk.uncompressed_size)
 
     def top_level(self, pos: int, opcode: int, body: bytes) -> None:
-        """A schema, channel or message outside any chunk (not written by RunLog)."""
+        """A channel or message outside any chunk (RunLog never writes these)."""
+        if pos in self.top_level_seen:
+            return
+        self.top_level_seen.add(pos)
         try:
-            if opcode == Opcode.SCHEMA:
-                schema = _parse(Schema.read, body)
-                self.schemas.setdefault(schema.id, schema)
-            elif opcode == Opcode.CHANNEL:
+            if opcode == Opcode.CHANNEL:
                 channel = _parse(Channel.read, body)
                 self.channels.setdefault(channel.id, channel)
             else:
                 self.raw.append(_parse(lambda s: Message.read(s, len(body)), body))
         except _DECODE_ERRORS as err:
-            self.problem(f"byte {pos}: unreadable {Opcode(opcode).name} record ({err}); skipped")
+            self.problem(f"byte {pos}: unreadable {Opcode(opcode).name} record "
+                         f"({_why(err)}); skipped")
 
     def read_summary(self, footer_at: int, footer: Footer) -> set[int] | None:
-        """Take schemas and channels the data section lacked from the summary; chunk offsets.
+        """Take channels the data section lacked (first chunk damaged) from the summary.
 
-        Returns the offsets of all chunks the summary indexes, or None if it cannot be trusted.
+        Returns the offsets of all chunks the summary indexes, or None if it cannot be parsed.
         """
-        buf, start = self.buf, footer.summary_start
-        if footer.summary_crc != 0:
-            crc = zlib.crc32(buf[start:footer_at + _HEADER.size + 16])
-            if crc != footer.summary_crc:
-                self.problem(f"summary section at byte {start} is damaged (CRC mismatch); "
-                             "ignored it")
-                return None
+        buf = self.buf
         end = footer.summary_offset_start or footer_at
         offsets: set[int] = set()
-        pos = start
+        pos = footer.summary_start
         while pos + _HEADER.size <= end:
             opcode, length = _HEADER.unpack_from(buf, pos)
             body = buf[pos + _HEADER.size:pos + _HEADER.size + length]
             try:
-                if opcode == Opcode.SCHEMA:
-                    schema = _parse(Schema.read, body)
-                    self.schemas.setdefault(schema.id, schema)
-                elif opcode == Opcode.CHANNEL:
+                if opcode == Opcode.CHANNEL:
                     channel = _parse(Channel.read, body)
                     self.channels.setdefault(channel.id, channel)
                 elif opcode == Opcode.CHUNK_INDEX:
                     offsets.add(_parse(ChunkIndex.read, body).chunk_start_offset)
             except _DECODE_ERRORS as err:
-                self.problem(f"byte {pos}: unreadable summary record ({err}); ignored the rest")
+                self.problem(f"byte {pos}: unreadable summary record ({_why(err)}); "
+                             "ignored the rest")
                 return None
             pos += _HEADER.size + length
-        return offsets
+        return offsets or None  # no chunk index: count damaged chunks as found
 
     def decode(self) -> None:
         """Turn the kept raw messages into LogMessages; count what cannot be decoded."""

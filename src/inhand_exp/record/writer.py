@@ -133,7 +133,10 @@ class RunLog:
         if self._closed:
             raise ValueError(f"run log {self.path} is closed")
         check_required(topic, message)
-        data = encode_message(message)
+        try:
+            data = encode_message(message)
+        except (TypeError, ValueError) as err:
+            raise type(err)(f"{topic} message: {err}") from err
         log_time = time.time_ns() if log_time_ns is None else operator.index(log_time_ns)
         if not 0 <= log_time < _UINT64:
             raise ValueError(f"log_time_ns must be in [0, 2**64), got {log_time}")

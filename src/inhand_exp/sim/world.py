@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import math
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -95,6 +96,7 @@ class World:
                 obj.length_m, obj.width_m, obj.depth_m, obj.mass_kg), (0.0, 0.0, 0.0))
         self._setup_dynamics(hand, obj)
         self._steps = 0
+        self.step_wall_s = 0.0  # wall time spent inside stepSimulation (benchmarks)
 
     def _load(self, path: Path, text: str, base: tuple[float, float, float]) -> int:
         path.write_text(text)
@@ -137,6 +139,8 @@ class World:
         for i, f in enumerate(self.fingers):
             for j in range(2):
                 pb.resetJointState(f, j, float(q[2 * i + j]), 0.0, physicsClientId=cid)
+        # contact queries must describe the new state, not the manifold of the last step
+        pb.performCollisionDetection(physicsClientId=cid)
         self._steps = 0
 
     @property
@@ -232,7 +236,9 @@ class World:
             pb.setJointMotorControlArray(f, (0, 1), pb.TORQUE_CONTROL,
                                          forces=(float(tau[2 * i]), float(tau[2 * i + 1])),
                                          physicsClientId=cid)
+        t = time.perf_counter()
         pb.stepSimulation(physicsClientId=cid)
+        self.step_wall_s += time.perf_counter() - t
         self._steps += 1
 
     def step_raw(self, n: int) -> None:

@@ -1,0 +1,1 @@
+"""Benchmarks of the physics core: control-loop speed and primitive success rates."""

@@ -1,0 +1,179 @@
+"""``inhand-bench``: speed of the control loop and success of the primitives; last line is JSON.
+
+    inhand-bench speed [--object pole|cube] [--seconds S] [overrides...]
+    inhand-bench primitives [--object pole|cube] [--trials N] [--seed S] [--workers W]
+                            [--only hold,repose,...] [overrides...]
+
+Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import zlib
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from functools import partial
+
+import numpy as np
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
+
+from inhand_exp.bench import trials
+from inhand_exp.cli import CONF_DIR
+from inhand_exp.config import ConfigError, PerturbConfig, validate
+
+# Trials per section when --trials is not given: the targets of the physics milestone.
+DEFAULT_TRIALS = {"hold": 100, "repose": 1000, "slide": 500, "flip_left": 200,
+                  "flip_right": 200, "perturbed": 200}
+PERTURBATIONS = {"heavier": dict(mass_scale=1.1), "lighter": dict(mass_scale=0.9),
+                 "thicker": dict(width_scale=1.5), "thinner": dict(width_scale=0.5),
+                 "longer": dict(length_scale=1.1), "shorter": dict(length_scale=0.9)}
+
+
+def load_config(obj: str, overrides: list[str]) -> DictConfig:
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=[f"object={obj}", *overrides])
+    validate(cfg)
+    return cfg
+
+
+# --- primitives ---------------------------------------------------------------------------
+
+_BENCHES: dict[tuple, trials.Bench] = {}
+
+
+def _run_trial(cfg: DictConfig, setting: tuple, name: str, seed: int, index: int
+               ) -> trials.Trial | None:
+    """One trial in this process (worlds are built once per process and setting)."""
+    if setting not in _BENCHES:
+        perturb, noise = setting
+        p = PerturbConfig(name=perturb, **PERTURBATIONS.get(perturb, {}))
+        _BENCHES[setting] = trials.Bench(cfg, p, noise)
+    bench = _BENCHES[setting]
+    rng = np.random.default_rng([seed, zlib.crc32(f"{name}/{setting}".encode()), index])
+    fn: Callable = {"hold": trials.hold, "repose": trials.repose, "slide": trials.slide,
+                    "flip_left": partial(trials.flip, finger=0),
+                    "flip_right": partial(trials.flip, finger=2)}[name]
+    return fn(bench, rng)
+
+
+def summarise(results: list[trials.Trial | None]) -> dict:
+    done = [r for r in results if r is not None]
+    if not done:
+        return {"trials": 0, "success_rate": None, "drop_rate": None}
+    em = np.array([r.err_m for r in done])
+    er = np.array([r.err_rad for r in done])
+    return {"trials": len(done),
+            "success_rate": float(np.mean([r.success for r in done])),
+            "drop_rate": float(np.mean([r.dropped for r in done])),
+            "mean_err_m": float(em.mean()), "max_err_m": float(em.max()),
+            "mean_err_rad": float(er.mean()), "max_err_rad": float(er.max()),
+            "sim_s": float(sum(r.sim_s for r in done)),
+            "wall_s": float(sum(r.wall_s for r in done)),
+            "no_feasible_start": len(results) - len(done)}
+
+
+def run_section(pool, cfg, setting, name, n, seed) -> dict:
+    job = partial(_run_trial, cfg, setting, name, seed)
+    results = list(pool.map(job, range(n))) if pool else [job(i) for i in range(n)]
+    return summarise(results)
+
+
+def primitives(args, cfg: DictConfig) -> dict:
+    names = ["hold", "repose", "slide", "flip_left", "flip_right"]
+    if cfg.object.name == "cube":
+        names = ["hold", "repose"]  # release and land come with the cube primitives
+    only = args.only.split(",") if args.only else names + ["perturbed"]
+    count = (lambda s: args.trials) if args.trials else DEFAULT_TRIALS.get
+    pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    noise_paper = (0.005, np.deg2rad(2.86))
+    out = {"object": cfg.object.name, "seed": args.seed, "results": {}, "perturbed": {}}
+    try:
+        for name in names:
+            if name in only:
+                res = run_section(pool, cfg, ("none", (0.0, 0.0)), name, count(name), args.seed)
+                out["results"][name] = res
+                _print_row(name, res)
+        if "perturbed" in only and cfg.object.name == "pole":
+            settings = [(p, (0.0, 0.0)) for p in PERTURBATIONS] + [("none", noise_paper)]
+            for setting in settings:
+                label = setting[0] if setting[0] != "none" else "noise=paper"
+                res = run_section(pool, cfg, setting, "repose", count("perturbed"), args.seed)
+                out["perturbed"][label] = res
+                _print_row(f"repose {label}", res)
+    finally:
+        if pool:
+            pool.shutdown()
+    return out
+
+
+def _print_row(name: str, r: dict) -> None:
+    if not r["trials"]:
+        print(f"{name:22s} no feasible start found", flush=True)
+        return
+    print(f"{name:22s} n={r['trials']:5d}  success {r['success_rate']:6.1%}  "
+          f"drop {r['drop_rate']:5.1%}  err mean/max {r['mean_err_m'] * 1e3:5.2f}/"
+          f"{r['max_err_m'] * 1e3:5.2f} mm {r['mean_err_rad']:.4f}/{r['max_err_rad']:.4f} rad  "
+          f"sim {r['sim_s']:7.1f} s  wall {r['wall_s']:6.1f} s", flush=True)
+
+
+# --- speed --------------------------------------------------------------------------------
+
+def speed(args, cfg: DictConfig) -> dict:
+    """Control-loop and raw stepSimulation rates measured in the same runs of a hold."""
+    bench = trials.Bench(cfg)
+    rng = np.random.default_rng(args.seed)
+    world = bench.world
+    loop_steps, loop_wall, raw_wall = 0, 0.0, 0.0
+    deadline = time.perf_counter() + args.seconds
+    while time.perf_counter() < deadline:
+        contacts = bench.start(rng)
+        prim = trials.Repose(bench.model, contacts, np.zeros(3), 2.0)
+        world.step_wall_s = 0.0
+        t = time.perf_counter()
+        out = trials.execute(world, prim)
+        loop_wall += time.perf_counter() - t
+        loop_steps += out.steps
+        raw_wall += world.step_wall_s
+    ms = {}
+    for name in ("repose", "slide", "flip_left", "flip_right"):
+        runs = [r for r in (_run_trial(cfg, ("none", (0.0, 0.0)), name, args.seed, i)
+                            for i in range(args.primitive_runs)) if r is not None]
+        if runs:
+            ms[name] = 1e3 * float(np.mean([r.wall_s for r in runs]))
+    raw, loop = loop_steps / raw_wall, loop_steps / loop_wall
+    print(f"stepSimulation alone: {raw:10.0f} steps/s  (inside the loop, same run)")
+    print(f"full control loop:    {loop:10.0f} steps/s  ratio {loop / raw:.1%}")
+    for name, v in ms.items():
+        print(f"wall per {name:11s} {v:8.1f} ms")
+    return {"object": cfg.object.name, "raw_steps_per_s": raw, "loop_steps_per_s": loop,
+            "ratio": loop / raw, "ms_per_primitive": ms}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("what", choices=("speed", "primitives"))
+    parser.add_argument("--object", choices=("pole", "cube"), default="pole")
+    parser.add_argument("--trials", type=int, default=None,
+                        help="trials per section (default: the milestone's counts)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--workers", type=int, default=1, help="worker processes")
+    parser.add_argument("--only", default="", help="comma-separated sections")
+    parser.add_argument("--seconds", type=float, default=5.0, help="speed: loop timing budget")
+    parser.add_argument("--primitive-runs", type=int, default=5,
+                        help="speed: runs per primitive for the wall time")
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. sim.timestep_s=0.002")
+    args = parser.parse_args(argv)
+    if args.trials is not None and args.trials <= 0:
+        parser.error(f"--trials must be > 0, got {args.trials}")
+    try:
+        cfg = load_config(args.object, args.overrides)
+    except ConfigError as err:
+        sys.exit(f"inhand-bench: config error: {err}")
+    result = speed(args, cfg) if args.what == "speed" else primitives(args, cfg)
+    print(json.dumps(result))

@@ -1,0 +1,179 @@
+"""Benchmark trials of the primitives: one seeded trial = a grasp, a primitive, a judged outcome.
+
+Every outcome is judged from the simulated state (poses from the object's joints, contact
+coordinates from the fingertips' simulated positions, faces from PyBullet's contact normals),
+never from what the controller was asked to do.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from omegaconf import DictConfig
+
+from inhand_exp.config import ObjectConfig, PerturbConfig
+from inhand_exp.control.execute import Observation, execute
+from inhand_exp.control.flip import Flip
+from inhand_exp.control.grasp import Contacts, rotation
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.repose import Repose
+from inhand_exp.control.sample import random_grasp
+from inhand_exp.control.slide import Slide
+from inhand_exp.sim.world import ObjectSpec, World, wrap_angle
+
+HOLD_S = 10.0
+HOLD_TOL = (0.001, 0.01)  # m, rad
+REPOSE_TOL = (0.002, 0.02)
+SLIDE_TOL_M = 0.003
+
+
+@dataclass
+class Trial:
+    """One judged trial: success, drop, final errors (m, rad), simulated and wall time (s)."""
+
+    success: bool
+    dropped: bool
+    err_m: float
+    err_rad: float
+    sim_s: float
+    wall_s: float
+
+
+class Bench:
+    """A world and the controllers' model for one object, perturbation and noise setting."""
+
+    def __init__(self, cfg: DictConfig, perturb: PerturbConfig | None = None,
+                 noise: tuple[float, float] = (0.0, 0.0)):
+        obj = ObjectConfig(**{k: cfg.object[k] for k in cfg.object})
+        self.cfg, self.noise = cfg, noise
+        self.world = World(cfg.sim, cfg.hand, ObjectSpec.from_config(obj, perturb))
+        g = cfg.sim.gravity_mps2
+        self.model = HandModel.from_config(cfg.hand, obj, g)  # nominal: what controllers know
+        p = perturb or PerturbConfig()
+        true_obj = ObjectConfig(obj.name, obj.length_m * p.length_scale,
+                                obj.width_m * p.width_scale, obj.depth_m,
+                                obj.mass_kg * p.mass_scale, obj.friction)
+        self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
+        prim = cfg.primitives
+        self.durations = {"repose": prim.repose_duration_s, "slide": prim.slide_duration_s,
+                          "flip": prim.flip_duration_s}
+        self.steps = {"repose": prim.repose_dx_m, "dz": prim.repose_dz_m,
+                      "dtheta": prim.repose_dtheta_rad, "slide": prim.slide_dc_m}
+
+    def start(self, rng: np.random.Generator) -> Contacts:
+        """Reset the world at a random valid grasp of the simulated object."""
+        pose, contacts, q = random_grasp(self.true_model, rng)
+        self.world.reset(pose, q)
+        return contacts
+
+    def offset(self, rng: np.random.Generator) -> np.ndarray:
+        """Observation error on the object pose, held for one primitive."""
+        xz, th = self.noise
+        return rng.uniform([-xz, -xz, -th], [xz, xz, th])
+
+    def observe(self) -> Observation:
+        pose, twist = self.world.object_state()
+        q, qd = self.world.joint_state()
+        return Observation(q, qd, pose, twist, 0.0)
+
+    def coords(self) -> np.ndarray:
+        """Simulated contact coordinate of each fingertip along the object's long axis (m)."""
+        pose = self.world.object_pose()
+        return (self.world.tip_positions() - pose[:2]) @ rotation(pose[2])[:, 0]
+
+    def faces(self) -> dict[int, float]:
+        """Per finger in contact: the sign of the contact normal across the pole (+1: pushes
+        from below, i.e. the finger is on the bottom face)."""
+        pose = self.world.object_pose()
+        across = rotation(pose[2])[:, 1]
+        return {c.finger: float(np.sign(c.normal @ across)) for c in self.world.contacts()}
+
+
+def _pose_error(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    return float(np.hypot(*(a[:2] - b[:2]))), abs(wrap_angle(float(a[2] - b[2])))
+
+
+def hold(b: Bench, rng: np.random.Generator) -> Trial:
+    contacts = b.start(rng)
+    start = b.world.object_pose()
+    t = time.perf_counter()
+    out = execute(b.world, Repose(b.model, contacts, np.zeros(3), HOLD_S), b.offset(rng))
+    em, er = _pose_error(b.world.object_pose(), start)
+    ok = out.ok and em <= HOLD_TOL[0] and er <= HOLD_TOL[1]
+    return Trial(ok, not out.ok and out.reason != "infeasible", em, er, out.sim_time_s,
+                 time.perf_counter() - t)
+
+
+def _unit_reposes(b: Bench) -> list[np.ndarray]:
+    dx, dz, dth = b.steps["repose"], b.steps["dz"], b.steps["dtheta"]
+    return [np.array(v) for v in ([dx, 0, 0], [-dx, 0, 0], [0, dz, 0], [0, -dz, 0],
+                                  [0, 0, dth], [0, 0, -dth])]
+
+
+def _feasible(primitive, obs: Observation) -> bool:
+    return primitive.start(obs) is None
+
+
+def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
+    """A random feasible unit repose from a random grasp (None if none is feasible)."""
+    contacts = b.start(rng)
+    offset = b.offset(rng)
+    for k in rng.permutation(6):
+        delta = _unit_reposes(b)[k]
+        prim = Repose(b.model, contacts, delta, b.durations["repose"])
+        obs = b.observe()
+        if _feasible(prim, Observation(obs.q, obs.qd, obs.pose + offset, obs.twist, 0.0)):
+            break
+    else:
+        return None
+    start = b.world.object_pose()
+    t = time.perf_counter()
+    out = execute(b.world, prim, offset)
+    em, er = _pose_error(b.world.object_pose(), start + delta)
+    ok = out.ok and em <= REPOSE_TOL[0] and er <= REPOSE_TOL[1]
+    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+                 time.perf_counter() - t)
+
+
+def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
+    """A random feasible slide of one finger by the configured step."""
+    contacts = b.start(rng)
+    dc = b.steps["slide"]
+    for k in rng.permutation(6):
+        finger, sign = int(k // 2), (1 if k % 2 == 0 else -1)
+        prim = Slide(b.model, contacts, finger, sign * dc, b.durations["slide"])
+        if _feasible(prim, b.observe()):
+            break
+    else:
+        return None
+    before = b.coords()
+    t = time.perf_counter()
+    out = execute(b.world, prim, b.offset(rng))
+    moved = b.coords() - before
+    err = abs(float(moved[finger]) - sign * dc)
+    in_contact = finger in b.faces()
+    ok = out.ok and err <= SLIDE_TOL_M and in_contact
+    return Trial(ok, out.reason in ("lost_contact", "unstable"), err, 0.0, out.sim_time_s,
+                 time.perf_counter() - t)
+
+
+def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 400) -> Trial | None:
+    """A flip of ``finger`` from a random grasp where the flip's own check allows it."""
+    for _ in range(max_grasps):
+        contacts = b.start(rng)
+        prim = Flip(b.model, contacts, finger, b.durations["flip"])
+        if _feasible(prim, b.observe()):
+            break
+    else:
+        return None
+    before = b.faces().get(finger, 0.0)
+    start = b.world.object_pose()
+    t = time.perf_counter()
+    out = execute(b.world, prim, b.offset(rng))
+    after = b.faces()
+    em, er = _pose_error(b.world.object_pose(), start)
+    ok = out.ok and len(after) == 3 and after.get(finger, before) == -before
+    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+                 time.perf_counter() - t)

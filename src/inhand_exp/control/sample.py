@@ -1,0 +1,62 @@
+"""Seeded sampling of valid grasps: object poses, postures and contacts the hand can hold."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from inhand_exp.control.forces import Squeeze
+from inhand_exp.control.grasp import Contacts, Face, Posture, contact_frames, grasp_matrix
+from inhand_exp.control.hand import GeometryError, HandModel
+
+# Pose ranges of sampled grasps (m, m, rad): centred over the hand, within easy reach.
+POSE_LOW = np.array([-0.06, 0.16, -0.4])
+POSE_HIGH = np.array([0.06, 0.24, 0.4])
+
+
+def holds_strictly(model: HandModel, contacts: Contacts, mu_margin: float = 0.8,
+                   f_min: float = 0.5) -> bool:
+    """True when the contacts admit a squeeze strictly inside the (shrunk) friction cones."""
+    pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
+    act = [i for i in range(3) if contacts.active[i]]
+    return Squeeze.build(grasp_matrix(pts[act], nrm[act]), model.mu * mu_margin, f_min).usable
+
+
+def lone_between(rng: np.random.Generator, half: float, gap: float = 0.06
+                 ) -> tuple[Posture, tuple[float, float, float]]:
+    """A pole posture with a lone finger between the other two, on the opposite long face."""
+    lone = int(rng.integers(3))
+    side = Face.TOP if rng.random() < 0.5 else Face.BOTTOM
+    other = Face.BOTTOM if side == Face.TOP else Face.TOP
+    a = rng.uniform(-half, half - 2 * gap)
+    b = rng.uniform(a + 2 * gap, half)
+    mid = rng.uniform(a + gap / 2, b - gap / 2)
+    pair = sorted((a, b)) if rng.random() < 0.5 else sorted((a, b), reverse=True)
+    faces, coords = [other] * 3, [0.0] * 3
+    faces[lone], coords[lone] = side, mid
+    rest = [i for i in range(3) if i != lone]
+    for i, c in zip(rest, pair, strict=True):
+        coords[i] = c
+    return Posture(tuple(faces)), tuple(coords)
+
+
+def random_grasp(model: HandModel, rng: np.random.Generator, max_tries: int = 1000,
+                 press: float = 0.0005) -> tuple[np.ndarray, Contacts, np.ndarray]:
+    """A random pole pose and three-point grasp that the hand reaches and that holds.
+
+    Returns ``(pose, contacts, q)``. Rejection sampling, deterministic for a given ``rng``.
+    """
+    half = model.shape.length_m / 2 - 3 * model.tip_radius
+    for _ in range(max_tries):
+        pose = rng.uniform(POSE_LOW, POSE_HIGH)
+        posture, coords = lone_between(rng, half)
+        contacts = Contacts(posture, coords)
+        if not holds_strictly(model, contacts):
+            continue
+        try:
+            q = model.grasp_q(contacts, pose, press=press)
+        except GeometryError:
+            continue
+        if all(f.within_limits(q[2 * i:2 * i + 2], margin=0.1)
+               for i, f in enumerate(model.fingers)):
+            return pose, contacts, q
+    raise GeometryError(f"no valid grasp found in {max_tries} tries")

@@ -1,0 +1,314 @@
+"""The low-level primitives (hold, repose, slide, flip) run in PyBullet through ``execute``.
+
+Every check is on the simulated state (object joint states, fingertip link positions, PyBullet
+contact points), never on what a controller commanded. The planar pole (0.5 x 0.02 m, 0.1 kg)
+starts at ``X0`` in a three-point bend grasp (fingers 0 and 2 below, finger 1 above).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pybullet as pb
+import pytest
+
+from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
+from inhand_exp.control.execute import Outcome, execute
+from inhand_exp.control.flip import Flip
+from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
+from inhand_exp.control.hand import GeometryError, HandModel
+from inhand_exp.control.repose import Repose
+from inhand_exp.control.slide import Slide
+from inhand_exp.sim.world import World
+
+X0 = np.array([0.0, 0.2, 0.0])
+BEND = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
+FLIP_POSTURE = Posture((Face.TOP, Face.BOTTOM, Face.TOP))
+FLIP_SETUPS = {  # finger to flip -> a grasp from which it can go round an end
+    0: Contacts(FLIP_POSTURE, (-0.12, 0.03, 0.07)),
+    2: Contacts(FLIP_POSTURE, (-0.07, -0.03, 0.12)),
+}
+UNIT_REPOSES = [np.array(d) for d in ([0.01, 0.0, 0.0], [-0.01, 0.0, 0.0], [0.0, 0.01, 0.0],
+                                      [0.0, -0.01, 0.0], [0.0, 0.0, 0.1], [0.0, 0.0, -0.1])]
+REPOSE_IDS = ["+dx", "-dx", "+dz", "-dz", "+dtheta", "-dtheta"]
+REPOSE_S, SLIDE_S, FLIP_S = 0.5, 0.5, 2.0
+SLIDE_DC = 0.02
+
+
+# --- reading the simulated state --------------------------------------------------------------
+
+
+def contact_coords(world: World) -> np.ndarray:
+    """Each fingertip's coordinate along the pole's long axis (3,) (m), as simulated."""
+    pose = world.object_pose()
+    tips_O = (world.tip_positions() - pose[:2]) @ rotation(pose[2])  # rows: R^T (tip - p)
+    return tips_O[:, 0]
+
+
+def touching(world: World) -> set[int]:
+    """Fingers with a PyBullet contact point on the object after the last step."""
+    return {c.finger for c in world.contacts()}
+
+
+def pushes_up(world: World) -> dict[int, bool]:
+    """Per finger in contact: True when it pushes from the BOTTOM face (object frame)."""
+    R = rotation(world.object_pose()[2])
+    return {c.finger: bool((R.T @ c.normal)[1] > 0) for c in world.contacts()}
+
+
+def pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
+    """Position error (m) and wrapped angle error (rad) of ``pose`` from ``goal``."""
+    d = pose - goal
+    return float(np.hypot(d[0], d[1])), abs((d[2] + math.pi) % (2 * math.pi) - math.pi)
+
+
+def snapshot(world: World) -> tuple[np.ndarray, ...]:
+    return (*world.object_state(), *world.joint_state())
+
+
+def assert_untouched(world: World, before: tuple[np.ndarray, ...], outcome: Outcome) -> None:
+    assert outcome.steps == 0 and outcome.sim_time_s == 0.0
+    assert world.time_s == 0.0
+    for a, b in zip(before, snapshot(world), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def hold(model: HandModel, contacts: Contacts, duration_s: float) -> Repose:
+    return Repose(model, contacts, np.zeros(3), duration_s)
+
+
+class LimpFinger:
+    """Wraps a primitive and forces one finger's torques to zero every step."""
+
+    def __init__(self, inner, finger: int):
+        self.inner, self.finger = inner, finger
+        self.duration_s = inner.duration_s
+
+    def start(self, obs) -> str | None:
+        return self.inner.start(obs)
+
+    def torques(self, obs) -> np.ndarray | None:
+        tau = self.inner.torques(obs)
+        if tau is None:
+            return None
+        tau = tau.copy()
+        tau[2 * self.finger:2 * self.finger + 2] = 0.0
+        return tau
+
+
+# --- hold and repose --------------------------------------------------------------------------
+
+
+def test_hold_10s_keeps_the_pole_still(nominal_model, make_world):
+    world = make_world(BEND, X0)
+    start = world.object_pose()
+    out = execute(world, hold(nominal_model, BEND, 10.0))
+    assert out.reason == "done", out
+    assert out.steps == round(10.0 / world.dt)
+    dpos, dang = pose_error(world.object_pose(), start)
+    assert dpos < 1e-3 and dang < 0.01, (dpos, dang)
+    assert touching(world) == {0, 1, 2}
+
+
+@pytest.mark.parametrize("delta", UNIT_REPOSES, ids=REPOSE_IDS)
+def test_repose_unit_action(nominal_model, make_world, delta):
+    world = make_world(BEND, X0)
+    start = world.object_pose()
+    out = execute(world, Repose(nominal_model, BEND, delta, REPOSE_S))
+    assert out.reason == "done", out
+    dpos, dang = pose_error(world.object_pose(), start + delta)
+    assert dpos < 2e-3 and dang < 0.02, (dpos, dang)
+    assert touching(world) == {0, 1, 2}
+
+
+def test_repose_sequence_of_20_random_unit_actions(nominal_model, make_world):
+    world = make_world(BEND, X0)
+    rng = np.random.default_rng(7)
+    for k in range(20):
+        delta = UNIT_REPOSES[rng.integers(len(UNIT_REPOSES))]
+        start = world.object_pose()
+        out = execute(world, Repose(nominal_model, BEND, delta, REPOSE_S))
+        assert out.reason == "done", (k, delta, out)
+        dpos, dang = pose_error(world.object_pose(), start + delta)
+        assert dpos < 2e-3 and dang < 0.02, (k, delta, dpos, dang)
+    assert touching(world) == {0, 1, 2}
+
+
+# --- slide ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dc", [SLIDE_DC, -SLIDE_DC], ids=["+dc", "-dc"])
+@pytest.mark.parametrize("finger", [0, 1, 2])
+def test_slide_moves_only_its_finger(nominal_model, make_world, finger, dc):
+    world = make_world(BEND, X0)
+    c0, p0 = contact_coords(world), world.object_pose()
+    out = execute(world, Slide(nominal_model, BEND, finger, dc, SLIDE_S))
+    assert out.reason == "done", out
+    moved = contact_coords(world) - c0
+    assert abs(moved[finger] - dc) < 3e-3, moved
+    others = [j for j in range(3) if j != finger]
+    assert np.all(np.abs(moved[others]) < 2e-3), moved
+    dpos, _ = pose_error(world.object_pose(), p0)
+    assert dpos < 3e-3, dpos
+    assert touching(world) == {0, 1, 2}
+
+
+@pytest.mark.parametrize(("finger", "dc", "why"), [
+    (2, 0.2, "past the end"),  # 0.12 + 0.2 lies beyond the pole's half length
+    (1, 0.2, "cannot hold"),  # the top finger outside the bottom pair: no squeeze
+], ids=["past-end", "no-hold"])
+def test_slide_infeasible_leaves_world_untouched(nominal_model, make_world, finger, dc, why):
+    world = make_world(BEND, X0)
+    before = snapshot(world)
+    out = execute(world, Slide(nominal_model, BEND, finger, dc, SLIDE_S))
+    assert out.reason == "infeasible" and not out.ok, out
+    assert why in out.detail and f"finger {finger}" in out.detail, out.detail
+    assert_untouched(world, before, out)
+
+
+# --- flip -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))
+def test_flip_puts_finger_on_the_other_face(nominal_model, make_world, finger):
+    contacts = FLIP_SETUPS[finger]
+    world = make_world(contacts, X0)
+    assert execute(world, hold(nominal_model, contacts, 0.3)).reason == "done"
+    up_before, p0 = pushes_up(world), world.object_pose()
+    assert set(up_before) == {0, 1, 2}
+    flip = Flip(nominal_model, contacts, finger, FLIP_S)
+    out = execute(world, flip)
+    assert out.reason == "done", out
+    up_after = pushes_up(world)
+    assert set(up_after) == {0, 1, 2}
+    assert up_after[finger] != up_before[finger]
+    assert all(up_after[j] == up_before[j] for j in range(3) if j != finger)
+    # the flipped tip lies where the flip said it would land
+    assert abs(contact_coords(world)[finger] - flip.result.coords[finger]) < 3e-3
+    dpos, dang = pose_error(world.object_pose(), p0)
+    assert dpos < 5e-3 and dang < 0.05, (dpos, dang)
+    after = execute(world, hold(nominal_model, flip.result, 1.0))
+    assert after.reason == "done", after
+    assert touching(world) == {0, 1, 2}
+
+
+def test_flip_infeasible_when_the_pair_cannot_hold(nominal_model, make_world):
+    world = make_world(BEND, X0)  # fingers 1 (top) and 2 (bottom) alone cannot hold the pole
+    before = snapshot(world)
+    out = execute(world, Flip(nominal_model, BEND, 0, FLIP_S))
+    assert out.reason == "infeasible" and not out.ok, out
+    assert out.detail, out
+    assert_untouched(world, before, out)
+
+
+# --- failure detection ------------------------------------------------------------------------
+
+
+def test_limp_finger_drops_the_pole(nominal_model, make_world):
+    world = make_world(BEND, X0)
+    z0 = world.object_pose()[1]
+    out = execute(world, LimpFinger(hold(nominal_model, BEND, 2.0), finger=0))
+    assert out.reason in ("lost_contact", "infeasible"), out
+    assert not out.ok and out.detail
+    assert out.steps < round(2.0 / world.dt)
+    assert world.object_pose()[1] < z0 - 5e-3
+
+
+def test_grasp_lost_reports_why(nominal_model, make_world):
+    world = make_world(BEND, X0)
+    world.step(np.zeros(6))
+    assert world.grasp_lost() is None
+    q = world.joint_q()
+    world.reset(X0 + np.array([0.0, 0.5, 0.0]), q)  # the pole far above the tips
+    world.step(np.zeros(6))
+    lost = world.grasp_lost()
+    assert isinstance(lost, str) and "0 fingertip" in lost, lost
+    # three tips touching, all from below: not held from opposite sides
+    below = Contacts(Posture((Face.BOTTOM,) * 3), (-0.12, 0.0, 0.12))
+    world.reset(X0, nominal_model.grasp_q(below, X0, press=0.0005))
+    world.step(np.zeros(6))
+    assert touching(world) == {0, 1, 2}
+    assert world.grasp_lost() == "object not held from opposite sides"
+
+
+def test_unstable_flags_runaway_velocity_and_nan(make_world):
+    world = make_world(BEND, X0)
+    assert world.unstable() is None
+    pb.resetJointState(world.object, 0, 0.0, targetVelocity=1e3, physicsClientId=world.client)
+    why = world.unstable()
+    assert isinstance(why, str) and "velocity" in why, why
+    pb.resetJointState(world.object, 0, float("nan"), targetVelocity=0.0,
+                       physicsClientId=world.client)
+    why = world.unstable()
+    assert isinstance(why, str) and "non-finite" in why, why
+
+
+# --- determinism ------------------------------------------------------------------------------
+
+
+def _mixed_run(model: HandModel, world: World, seed: int) -> list[Outcome]:
+    rng = np.random.default_rng(seed)
+    outcomes = []
+    for _ in range(5):
+        contacts = model.measured(BEND, world.object_pose(), world.joint_q())
+        if rng.random() < 0.5:
+            prim = Repose(model, contacts, UNIT_REPOSES[rng.integers(6)], REPOSE_S)
+        else:
+            prim = Slide(model, contacts, int(rng.integers(3)), SLIDE_DC * rng.choice([-1, 1]),
+                         SLIDE_S)
+        outcomes.append(execute(world, prim))
+    return outcomes
+
+
+def test_same_seed_gives_bit_identical_states(nominal_model, make_world):
+    a, b = make_world(BEND, X0), make_world(BEND, X0)
+    out_a, out_b = _mixed_run(nominal_model, a, 3), _mixed_run(nominal_model, b, 3)
+    assert out_a == out_b
+    assert sum(o.steps for o in out_a) > 0
+    for x, y in zip(snapshot(a), snapshot(b), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+# --- model mismatch ---------------------------------------------------------------------------
+
+PERTURBATIONS = [
+    PerturbConfig(name="mass x1.1", mass_scale=1.1),
+    PerturbConfig(name="mass x0.9", mass_scale=0.9),
+    PerturbConfig(name="width x1.5", width_scale=1.5),
+    PerturbConfig(name="width x0.5", width_scale=0.5),
+    PerturbConfig(name="length x1.1", length_scale=1.1),
+    PerturbConfig(name="length x0.9", length_scale=0.9),
+]
+
+
+@pytest.mark.parametrize("perturb", PERTURBATIONS, ids=[p.name for p in PERTURBATIONS])
+def test_repose_on_perturbed_object_with_nominal_model(nominal_model, make_world, perturb):
+    nominal = ObjectConfig()
+    actual = dataclasses.replace(nominal, length_m=nominal.length_m * perturb.length_scale,
+                                 width_m=nominal.width_m * perturb.width_scale,
+                                 mass_kg=nominal.mass_kg * perturb.mass_scale)
+    # the tips start on the simulated surface; the controller knows only the nominal pole
+    surface = HandModel.from_config(HandConfig(), actual, SimConfig().gravity_mps2)
+    world = make_world(BEND, X0, perturb=perturb, q_model=surface)
+    for delta in (UNIT_REPOSES[0], UNIT_REPOSES[2], UNIT_REPOSES[5]):
+        start = world.object_pose()
+        out = execute(world, Repose(nominal_model, BEND, delta, REPOSE_S))
+        assert out.reason == "done", (delta, out)
+        dpos, dang = pose_error(world.object_pose(), start + delta)
+        assert dpos < 3e-3 and dang < 0.03, (delta, dpos, dang)
+    assert touching(world) == {0, 1, 2}
+
+
+# --- geometry ---------------------------------------------------------------------------------
+
+
+def test_short_fingers_rejected_at_build_time():
+    with pytest.raises(GeometryError, match="reach"):
+        HandModel.from_config(HandConfig(link_lengths_m=[0.01, 0.01]), ObjectConfig(), 9.81)
+
+
+def test_grasp_out_of_reach_names_the_finger(nominal_model):
+    with pytest.raises(GeometryError, match=r"finger \d cannot reach"):
+        nominal_model.grasp_q(BEND, np.array([0.0, 2.0, 0.0]))

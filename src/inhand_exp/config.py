@@ -114,6 +114,8 @@ class PrimitivesConfig:
     repose_duration_s: float = spec(0.5, "Simulated time given to one repose (s).", gt=0)
     slide_duration_s: float = spec(0.5, "Simulated time given to one slide (s).", gt=0)
     flip_duration_s: float = spec(2.0, "Simulated time given to one flip (s).", gt=0)
+    release_duration_s: float = spec(1.0, "Simulated time given to one release (s).", gt=0)
+    land_duration_s: float = spec(1.5, "Simulated time given to one land (s).", gt=0)
     kp: float = spec(400.0, "Object-pose PD stiffness (1/s^2).", ge=0)
     kd: float = spec(40.0, "Object-pose PD damping (1/s).", ge=0)
     min_normal_force_n: float = spec(0.5, "Least normal force at every held contact (N).", ge=0)
@@ -308,7 +310,8 @@ def _check_consistency(cfg: DictConfig) -> None:
                               f"hand.joint_lower_rad[{i}] + 2 pi must hold, got {a}, {b}")
     dt = cfg.sim.timestep_s
     durations = {f"primitives.{k}": cfg.primitives[k]
-                 for k in ("repose_duration_s", "slide_duration_s", "flip_duration_s")}
+                 for k in ("repose_duration_s", "slide_duration_s", "flip_duration_s",
+                           "release_duration_s", "land_duration_s")}
     if cfg.learner.name == "ddpg":
         durations["learner.control_period_s"] = cfg.learner.control_period_s
     for key, duration in durations.items():

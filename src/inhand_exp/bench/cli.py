@@ -28,7 +28,7 @@ from inhand_exp.config import ConfigError, PerturbConfig, validate
 
 # Trials per section when --trials is not given: the targets of the physics milestone.
 DEFAULT_TRIALS = {"hold": 100, "repose": 1000, "slide": 500, "flip_left": 200,
-                  "flip_right": 200, "perturbed": 200}
+                  "flip_right": 200, "perturbed": 200, "release": 200, "land": 200}
 PERTURBATIONS = {"heavier": dict(mass_scale=1.1), "lighter": dict(mass_scale=0.9),
                  "thicker": dict(width_scale=1.5), "thinner": dict(width_scale=0.5),
                  "longer": dict(length_scale=1.1), "shorter": dict(length_scale=0.9)}
@@ -57,7 +57,8 @@ def _run_trial(cfg: DictConfig, setting: tuple, name: str, seed: int, index: int
     rng = np.random.default_rng([seed, zlib.crc32(f"{name}/{setting}".encode()), index])
     fn: Callable = {"hold": trials.hold, "repose": trials.repose, "slide": trials.slide,
                     "flip_left": partial(trials.flip, finger=0),
-                    "flip_right": partial(trials.flip, finger=2)}[name]
+                    "flip_right": partial(trials.flip, finger=2),
+                    "release": trials.release, "land": trials.land}[name]
     return fn(bench, rng)
 
 
@@ -86,7 +87,7 @@ def run_section(pool, cfg, setting, name, n, seed) -> dict:
 def primitives(args, cfg: DictConfig) -> dict:
     names = ["hold", "repose", "slide", "flip_left", "flip_right"]
     if cfg.object.name == "cube":
-        names = ["hold", "repose"]  # release and land come with the cube primitives
+        names = ["hold", "repose", "release", "land"]
     only = args.only.split(",") if args.only else names + ["perturbed"]
     count = (lambda s: args.trials) if args.trials else DEFAULT_TRIALS.get
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None

@@ -18,6 +18,7 @@ from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, rotation
 from inhand_exp.control.hand import HandModel
+from inhand_exp.control.release_land import Land, Release
 from inhand_exp.control.repose import Repose
 from inhand_exp.control.sample import random_grasp
 from inhand_exp.control.slide import Slide
@@ -58,7 +59,8 @@ class Bench:
         self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
         prim = cfg.primitives
         self.durations = {"repose": prim.repose_duration_s, "slide": prim.slide_duration_s,
-                          "flip": prim.flip_duration_s}
+                          "flip": prim.flip_duration_s, "release": prim.release_duration_s,
+                          "land": prim.land_duration_s}
         self.steps = {"repose": prim.repose_dx_m, "dz": prim.repose_dz_m,
                       "dtheta": prim.repose_dtheta_rad, "slide": prim.slide_dc_m}
 
@@ -175,5 +177,47 @@ def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 400)
     after = b.faces()
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and len(after) == 3 and after.get(finger, before) == -before
+    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+                 time.perf_counter() - t)
+
+
+def release(b: Bench, rng: np.random.Generator) -> Trial | None:
+    """Release of a random finger whose release the primitive's own check allows."""
+    contacts = b.start(rng)
+    for finger in rng.permutation(3):
+        prim = Release(b.model, contacts, int(finger), b.durations["release"])
+        if _feasible(prim, b.observe()):
+            break
+    else:
+        return None
+    start = b.world.object_pose()
+    t = time.perf_counter()
+    out = execute(b.world, prim, b.offset(rng))
+    touching = set(b.faces())
+    em, er = _pose_error(b.world.object_pose(), start)
+    ok = out.ok and int(finger) not in touching and len(touching) == 2
+    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+                 time.perf_counter() - t)
+
+
+def land(b: Bench, rng: np.random.Generator) -> Trial | None:
+    """Land after a successful release (the release itself is not scored here)."""
+    contacts = b.start(rng)
+    for finger in rng.permutation(3):
+        prim = Release(b.model, contacts, int(finger), b.durations["release"])
+        if _feasible(prim, b.observe()):
+            break
+    else:
+        return None
+    if not execute(b.world, prim).ok:
+        return None
+    prim = Land(b.model, prim.result, int(finger), b.durations["land"])
+    if not _feasible(prim, b.observe()):
+        return None
+    start = b.world.object_pose()
+    t = time.perf_counter()
+    out = execute(b.world, prim, b.offset(rng))
+    em, er = _pose_error(b.world.object_pose(), start)
+    ok = out.ok and len(b.faces()) == 3
     return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
                  time.perf_counter() - t)

@@ -39,16 +39,33 @@ def lone_between(rng: np.random.Generator, half: float, gap: float = 0.06
     return Posture(tuple(faces)), tuple(coords)
 
 
-def random_grasp(model: HandModel, rng: np.random.Generator, max_tries: int = 1000,
-                 press: float = 0.0005) -> tuple[np.ndarray, Contacts, np.ndarray]:
-    """A random pole pose and three-point grasp that the hand reaches and that holds.
+def any_faces(rng: np.random.Generator, half_x: float, half_z: float
+              ) -> tuple[Posture, tuple[float, float, float]]:
+    """A box posture with every finger on a random face at a random coordinate."""
+    faces = tuple(Face(int(f)) for f in rng.integers(4, size=3))
+    coords = tuple(float(rng.uniform(-h, h)) for h in
+                   (half_x if f in (Face.TOP, Face.BOTTOM) else half_z for f in faces))
+    return Posture(faces), coords
 
+
+def elongated(model: HandModel) -> bool:
+    """True for a pole-like object: its grasps use the two long faces only."""
+    return model.shape.length_m > 2 * model.shape.width_m
+
+
+def random_grasp(model: HandModel, rng: np.random.Generator, max_tries: int = 2000,
+                 press: float = 0.0005) -> tuple[np.ndarray, Contacts, np.ndarray]:
+    """A random object pose and three-finger grasp that the hand reaches and that holds.
+
+    A pole gets a lone finger between the other two on its long faces; a cube any faces.
     Returns ``(pose, contacts, q)``. Rejection sampling, deterministic for a given ``rng``.
     """
-    half = model.shape.length_m / 2 - 3 * model.tip_radius
+    r = model.tip_radius
+    half_x, half_z = model.shape.length_m / 2 - 3 * r, model.shape.width_m / 2 - 2 * r
     for _ in range(max_tries):
         pose = rng.uniform(POSE_LOW, POSE_HIGH)
-        posture, coords = lone_between(rng, half)
+        posture, coords = (lone_between(rng, half_x) if elongated(model)
+                           else any_faces(rng, half_x + r, half_z))
         contacts = Contacts(posture, coords)
         if not holds_strictly(model, contacts):
             continue

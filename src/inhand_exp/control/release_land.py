@@ -1,0 +1,141 @@
+"""Release and land (cube, paper section IV-D): a flip split into its two halves.
+
+Release hands one finger's load to the other two (which must push from opposite faces), then
+lifts the tip clear of its face. Land carries a free tip round the object, outside it, to the
+nearest face and coordinate where the three fingers then hold the object with a squeeze strictly
+inside the friction cones, touches down and hands part of the load back. The object is held at
+its start pose throughout.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from inhand_exp.control.flip import handover_torques, pair_holds, phase_times, strict_hold
+from inhand_exp.control.grasp import Contacts, Face, face_axes, rotation
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.handover import PathTracker, hover, route_round
+from inhand_exp.control.repose import Gains, GraspPlan
+
+RELEASE_PHASES = {"unload": 0.35, "lift": 0.35}  # the rest holds still
+LAND_PHASES = {"travel": 0.5, "touch": 0.15, "load": 0.15}
+
+
+class Release:
+    """Primitive: lift ``finger`` off the object while the other two hold it."""
+
+    def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
+                 gains: Gains | None = None, clearance_m: float = 0.02, kp_joint: float = 900.0,
+                 kd_joint: float = 60.0):
+        self.model, self.contacts, self.finger = model, contacts, finger
+        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.clearance, self.kp, self.kd = clearance_m, kp_joint, kd_joint
+        self.times = phase_times(duration_s, RELEASE_PHASES)
+
+    @property
+    def result(self) -> Contacts:
+        return self.contacts.moved(self.finger, active=False)
+
+    def start(self, obs) -> str | None:
+        i = self.finger
+        if not self.contacts.active[i]:
+            return f"finger {i} is not in contact"
+        plans = pair_holds(self.model, self.contacts, i, obs, self.gains)
+        if isinstance(plans, str):
+            return plans
+        self.full, self.pair = plans
+        k = self.full.fingers.index(i)
+        inward, _ = face_axes(self.contacts.posture.faces[i])
+        tip = self.full.tips_O[k]
+        self.tracker = PathTracker([tip, tip - self.clearance * inward], *self.times["lift"])
+        self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
+        self.origin = obs.pose.copy()
+        if not self.tracker.reachable(self.model, i, self.elbow, obs.pose, rotation(obs.pose[2])):
+            return f"finger {i} cannot lift off its face"
+        return None
+
+    def torques(self, obs) -> np.ndarray | None:
+        un0, un1 = self.times["unload"]
+        s = min(1.0, max(0.0, (obs.t - un0) / (un1 - un0)))
+        mix = [(self.full, 1 - s), (self.pair, s)]
+        return handover_torques(self.model, self.pair, self.finger, mix, self.tracker,
+                                self.elbow, obs, self.origin, self.gains, self.kp, self.kd)
+
+
+class Land:
+    """Primitive: put the free ``finger`` down where the three fingers hold the object best.
+
+    Candidates are every face and coordinate (5 mm apart); the nearest by path length whose
+    grasp admits a strict squeeze and whose path is reachable wins.
+    """
+
+    def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
+                 gains: Gains | None = None, clearance_m: float = 0.02, press_m: float = 0.001,
+                 kp_joint: float = 900.0, kd_joint: float = 60.0, step_m: float = 0.005):
+        self.model, self.contacts, self.finger = model, contacts, finger
+        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.clearance, self.press, self.step = clearance_m, press_m, step_m
+        self.kp, self.kd = kp_joint, kd_joint
+        self.times = phase_times(duration_s, LAND_PHASES)
+
+    @property
+    def result(self) -> Contacts:
+        return self.contacts.moved(self.finger, coord=self.coord, face=self.face, active=True)
+
+    def start(self, obs) -> str | None:
+        model, i = self.model, self.finger
+        if self.contacts.active[i]:
+            return f"finger {i} is already in contact"
+        plans = pair_holds(model, self.contacts, i, obs, self.gains)
+        if isinstance(plans, str):
+            return plans
+        _, self.pair = plans
+        self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
+        self.origin = obs.pose.copy()
+        R = rotation(obs.pose[2])
+        tip_O = R.T @ (model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2])
+        for _, face, coord, path in self._candidates(tip_O):
+            if not strict_hold(model, self.contacts.moved(i, coord=coord, face=face,
+                                                          active=True), self.gains):
+                continue
+            tracker = PathTracker(path, self.times["travel"][0], self.times["touch"][1])
+            if tracker.reachable(model, i, self.elbow, obs.pose, R):
+                self.face, self.coord, self.tracker = face, coord, tracker
+                self.loaded: GraspPlan | None = None
+                return None
+        return f"no reachable landing holds the object for finger {i}"
+
+    def _candidates(self, tip_O: np.ndarray):
+        """(path length, face, coordinate, path) for every landing, shortest first."""
+        shape, r = self.model.shape, self.model.tip_radius
+        hx, hz = shape.length_m / 2, shape.width_m / 2
+        gap = r + self.clearance
+        # the face the free tip is off: the one whose outward distance is largest
+        here = max(Face, key=lambda f: float(-face_axes(f)[0] @ tip_O)
+                   - (hz if f in (Face.TOP, Face.BOTTOM) else hx))
+        out = []
+        for face in Face:
+            n = int((shape.half_extent(face) - 2 * r) // self.step)
+            for k in range(-n, n + 1):
+                coord = k * self.step
+                path = [tip_O, *route_round(hx, hz, tip_O, here, face,
+                                            hover(hx, hz, face, coord, gap), gap)[1:],
+                        hover(hx, hz, face, coord, r - self.press)]
+                length = sum(float(np.linalg.norm(b - a)) for a, b in zip(path, path[1:],
+                                                                         strict=False))
+                out.append((length, face, coord, path))
+        out.sort(key=lambda c: c[0])
+        return out
+
+    def torques(self, obs) -> np.ndarray | None:
+        ld0, ld1 = self.times["load"]
+        if obs.t < ld0:
+            mix = [(self.pair, 1.0)]
+        else:
+            if self.loaded is None:
+                self.loaded = GraspPlan.from_state(self.model, self.result, obs.pose, obs.q,
+                                                   self.gains)
+            s = min(1.0, (obs.t - ld0) / (ld1 - ld0))
+            mix = [(self.pair, 1 - s), (self.loaded, s)]
+        return handover_torques(self.model, self.pair, self.finger, mix, self.tracker,
+                                self.elbow, obs, self.origin, self.gains, self.kp, self.kd)

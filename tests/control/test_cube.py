@@ -1,0 +1,109 @@
+"""Cube primitives (paper section IV-D): hold, repose, release and land, judged from the sim."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from inhand_exp.config import HandConfig, ObjectConfig, SimConfig
+from inhand_exp.control.execute import Observation, execute
+from inhand_exp.control.grasp import Contacts, Face, Posture
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.release_land import Land, Release
+from inhand_exp.control.repose import Repose
+from inhand_exp.control.sample import random_grasp
+from inhand_exp.sim.world import ObjectSpec, World
+
+CUBE = ObjectConfig(name="cube", length_m=0.1, width_m=0.1, mass_kg=0.1)
+
+
+@pytest.fixture(scope="module")
+def cube_model() -> HandModel:
+    return HandModel.from_config(HandConfig(), CUBE, SimConfig().gravity_mps2)
+
+
+@pytest.fixture
+def cube_world(cube_model):
+    world = World(SimConfig(), HandConfig(), ObjectSpec.from_config(CUBE))
+    yield world
+    world.close()
+
+
+def observe(world: World) -> Observation:
+    pose, twist = world.object_state()
+    q, qd = world.joint_state()
+    return Observation(q, qd, pose, twist, 0.0)
+
+
+def touching(world: World) -> set[int]:
+    return {c.finger for c in world.contacts()}
+
+
+def releasable(model: HandModel, world: World, seed: int) -> tuple[Contacts, int, Release]:
+    """A seeded random cube grasp and a finger whose release the primitive allows."""
+    rng = np.random.default_rng(seed)
+    for _ in range(50):
+        pose, contacts, q = random_grasp(model, rng)
+        world.reset(pose, q)
+        for finger in range(3):
+            prim = Release(model, contacts, finger, 1.0)
+            if prim.start(observe(world)) is None:
+                return contacts, finger, prim
+    raise AssertionError("no releasable grasp found")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_random_cube_grasp_holds_and_reposes(cube_model, cube_world, seed):
+    pose, contacts, q = random_grasp(cube_model, np.random.default_rng(seed))
+    cube_world.reset(pose, q)
+    out = execute(cube_world, Repose(cube_model, contacts, np.zeros(3), 2.0))
+    assert out.reason == "done", out
+    assert np.abs(cube_world.object_pose() - pose).max() < 1e-3
+    delta = np.array([0.01, 0.0, 0.0])
+    out = execute(cube_world, Repose(cube_model, contacts, delta, 0.5))
+    if out.reason == "infeasible":  # target out of reach: refused before any step
+        assert out.steps == 0
+        return
+    assert out.reason == "done", out
+    err = cube_world.object_pose() - (pose + delta)
+    assert np.hypot(*err[:2]) < 2e-3 and abs(err[2]) < 0.02
+    assert touching(cube_world) == {0, 1, 2}
+
+
+@pytest.mark.parametrize("seed", [10, 11, 12])
+def test_release_then_land(cube_model, cube_world, seed):
+    contacts, finger, release = releasable(cube_model, cube_world, seed)
+    start = cube_world.object_pose()
+    out = execute(cube_world, release)
+    assert out.reason == "done", out
+    assert touching(cube_world) == {0, 1, 2} - {finger}  # lifted off, the pair holds
+    assert np.hypot(*(cube_world.object_pose() - start)[:2]) < 3e-3
+    land = Land(cube_model, release.result, finger, 1.5)
+    assert land.start(observe(cube_world)) is None
+    out = execute(cube_world, land)
+    assert out.reason == "done", out
+    assert touching(cube_world) == {0, 1, 2}
+    # the landed finger pushes on the face it was sent to (normal from PyBullet's contacts)
+    (c,) = [c for c in cube_world.contacts() if c.finger == finger]
+    pose = cube_world.object_pose()
+    inward = {Face.TOP: (0, -1), Face.BOTTOM: (0, 1), Face.RIGHT: (-1, 0), Face.LEFT: (1, 0)}
+    R = np.array([[np.cos(pose[2]), -np.sin(pose[2])], [np.sin(pose[2]), np.cos(pose[2])]])
+    assert float(c.normal @ (R @ np.array(inward[land.face]))) > 0.95
+    hold = execute(cube_world, Repose(cube_model, land.result, np.zeros(3), 1.0))
+    assert hold.reason == "done", hold
+
+
+def test_release_needs_an_opposing_pair(cube_model, cube_world):
+    # fingers 1 and 2 both on the bottom face cannot hold the cube without finger 0
+    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.BOTTOM)), (0.0, -0.02, 0.02))
+    pose = np.array([0.0, 0.2, 0.0])
+    cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
+    out = execute(cube_world, Release(cube_model, contacts, 0, 1.0))
+    assert out.reason == "infeasible" and out.steps == 0
+    assert "do not oppose" in out.detail
+
+
+def test_land_refuses_a_finger_in_contact(cube_model, cube_world):
+    contacts, finger, _ = releasable(cube_model, cube_world, 10)
+    out = execute(cube_world, Land(cube_model, contacts, finger, 1.5))
+    assert out.reason == "infeasible" and "already in contact" in out.detail

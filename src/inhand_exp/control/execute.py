@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+
+from inhand_exp.sim.world import state_problem
 
 
 @dataclass(frozen=True)
@@ -30,6 +33,9 @@ class Primitive(Protocol):
     def torques(self, obs: Observation) -> np.ndarray | None:
         """Joint torques (6,) for this step, or None if the forces became infeasible."""
 
+    def achieved(self, obs: Observation) -> str | None:
+        """At the end: None if the goal is reached in ``obs``, else what is missing."""
+
 
 class WorldLike(Protocol):
     dt: float
@@ -39,12 +45,15 @@ class WorldLike(Protocol):
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]: ...
     def step(self, tau: np.ndarray) -> None: ...
     def grasp_lost(self) -> str | None: ...
-    def unstable(self) -> str | None: ...
+
+
+StateCheck = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], "str | None"]
 
 
 @dataclass(frozen=True)
 class Outcome:
-    """How a primitive ended: ``reason`` is done, infeasible, lost_contact, unstable."""
+    """How a primitive ended: ``reason`` is done, infeasible, lost_contact, unstable, timeout
+    (the time ran out before the goal was reached)."""
 
     ok: bool
     reason: str
@@ -54,36 +63,42 @@ class Outcome:
 
 
 def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | None = None,
-            check_every: int = 4, drop_grace_s: float = 0.05) -> Outcome:
+            check_every: int = 4, drop_grace_s: float = 0.05,
+            state_check: StateCheck = state_problem) -> Outcome:
     """Drive ``primitive`` for its duration; stop early on infeasibility, a drop or instability.
 
     ``pose_offset`` is the observation error on the object pose (noise drawn by the caller, held
-    for the primitive). The grasp is checked from PyBullet's contacts every ``check_every`` steps;
-    a loss lasting ``drop_grace_s`` is a drop.
+    for the primitive). Every ``check_every`` steps the simulated state is checked with
+    ``state_check`` and the grasp from PyBullet's contacts; a loss lasting ``drop_grace_s`` is a
+    drop.
     """
     offset = np.zeros(3) if pose_offset is None else pose_offset
     n = round(primitive.duration_s / world.dt)
     lost_since: float | None = None
 
-    def observe(t: float) -> Observation:
+    def read() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         pose, twist = world.object_state()
         q, qd = world.joint_state()
-        return Observation(q, qd, pose + offset, twist, t)
+        return pose, twist, q, qd
 
-    why = primitive.start(observe(0.0))
+    pose, twist, q, qd = read()
+    why = primitive.start(Observation(q, qd, pose + offset, twist, 0.0))
     if why is not None:
         return Outcome(False, "infeasible", why, 0.0, 0)
     for k in range(n):
-        tau = primitive.torques(observe(k * world.dt))
+        if k:
+            pose, twist, q, qd = read()
+            if k % check_every == 0:  # the state after step k - 1
+                bad = state_check(pose, twist, q, qd)
+                if bad is not None:
+                    return Outcome(False, "unstable", bad, k * world.dt, k)
+        tau = primitive.torques(Observation(q, qd, pose + offset, twist, k * world.dt))
         if tau is None:
             return Outcome(False, "infeasible", "no contact forces inside the friction cones",
                            k * world.dt, k)
         world.step(tau)
         if (k + 1) % check_every:
             continue
-        bad = world.unstable()
-        if bad is not None:
-            return Outcome(False, "unstable", bad, (k + 1) * world.dt, k + 1)
         lost = world.grasp_lost()
         if lost is None:
             lost_since = None
@@ -91,4 +106,8 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
             lost_since = k * world.dt
         elif (k + 1) * world.dt - lost_since >= drop_grace_s:
             return Outcome(False, "lost_contact", lost, (k + 1) * world.dt, k + 1)
+    pose, twist, q, qd = read()
+    missing = primitive.achieved(Observation(q, qd, pose + offset, twist, n * world.dt))
+    if missing is not None:
+        return Outcome(False, "timeout", missing, n * world.dt, n)
     return Outcome(True, "done", "", n * world.dt, n)

@@ -12,6 +12,7 @@ a fixed joint); the model lumps the two into one rigid link, which is exact for 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -38,6 +39,26 @@ def lump(*parts: tuple[LinkInertia, float]) -> LinkInertia:
     com = sum(p.mass * (p.com + off) for p, off in parts) / mass
     inertia = sum(p.inertia + p.mass * (p.com + off - com) ** 2 for p, off in parts)
     return LinkInertia(mass, com, inertia)
+
+
+@dataclass(frozen=True, slots=True)
+class FingerTerms:
+    """One finger's state-dependent terms: tip ``(x, z)``, Jacobian ``j``, ``dJ/dt qd`` as
+    ``(jdx, jdz)``, mass matrix ``m`` and ``v`` = Coriolis + gravity torques (SI units)."""
+
+    x: float
+    z: float
+    j11: float
+    j12: float
+    j21: float
+    j22: float
+    jdx: float
+    jdz: float
+    m11: float
+    m12: float
+    m22: float
+    v1: float
+    v2: float
 
 
 @dataclass(frozen=True)
@@ -113,7 +134,7 @@ class FingerModel:
 
     # --- dynamics ---------------------------------------------------------------------------
 
-    @property
+    @functools.cached_property
     def _a(self) -> tuple[float, float, float]:
         m1, m2 = self.link1.mass, self.link2.mass
         c1, c2 = self.link1.com, self.link2.com
@@ -137,6 +158,31 @@ class FingerModel:
         c1, c12 = math.cos(q[0]), math.cos(q[0] + q[1])
         t2 = m2 * self.link2.com * self.gravity * c12
         return np.array([(m1 * self.link1.com + m2 * self.l1) * self.gravity * c1 + t2, t2])
+
+    def terms(self, q1: float, q2: float, qd1: float, qd2: float) -> FingerTerms:
+        """Everything the torque laws need at one state, in plain floats (the hot path).
+
+        Equal to ``tip``, ``jacobian``, ``jacobian_dot_qd``, ``mass_matrix``, ``coriolis`` and
+        ``gravity_torque``; computed together so sines and cosines are shared.
+        """
+        c1, s1 = math.cos(q1), math.sin(q1)
+        q12 = q1 + q2
+        c12, s12 = math.cos(q12), math.sin(q12)
+        l1, l2 = self.l1, self.l2
+        w12 = qd1 + qd2
+        a1, a2, a3 = self._a
+        c2a, s2a = a2 * math.cos(q2), a2 * math.sin(q2)
+        m1, m2 = self.link1.mass, self.link2.mass
+        g2 = m2 * self.link2.com * self.gravity * c12
+        return FingerTerms(
+            x=self.base_x + l1 * c1 + l2 * c12, z=self.base_z + l1 * s1 + l2 * s12,
+            j11=-l1 * s1 - l2 * s12, j12=-l2 * s12, j21=l1 * c1 + l2 * c12, j22=l2 * c12,
+            jdx=-l1 * c1 * qd1 * qd1 - l2 * c12 * w12 * w12,
+            jdz=-l1 * s1 * qd1 * qd1 - l2 * s12 * w12 * w12,
+            m11=a1 + 2 * c2a, m12=a3 + c2a, m22=a3,
+            v1=-s2a * (2 * qd1 * qd2 + qd2 * qd2) + (m1 * self.link1.com + m2 * l1)
+            * self.gravity * c1 + g2,
+            v2=s2a * qd1 * qd1 + g2)
 
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """``tau = M qdd + V + g`` for a free finger (no contact) (N m)."""

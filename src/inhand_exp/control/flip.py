@@ -90,6 +90,15 @@ def handover_torques(model: HandModel, pair: GraspPlan, finger: int, mix, tracke
     return tau
 
 
+def landed(model: HandModel, finger: int, face: Face, coord: float, obs, tol_m: float
+           ) -> str | None:
+    """None when ``finger`` touches ``face`` within ``tol_m`` of ``coord``, else what is off."""
+    gap, at = model.surface_gap(finger, face, obs.pose, obs.q)
+    if abs(gap) <= tol_m and abs(at - coord) <= tol_m:
+        return None
+    return f"finger {finger} {gap * 1e3:.1f} mm off {face.name.lower()} at {at:+.3f} m"
+
+
 class Flip:
     """Primitive: move ``finger`` to the opposite face.
 
@@ -169,6 +178,11 @@ class Flip:
                            hover(hx, hz, new_face, coord, gap), gap,
                            direction=1 if ccw[face] == via else -1)
         return [tip_O, *ring, hover(hx, hz, new_face, coord, r - self.press)]
+
+    def achieved(self, obs, tol_m: float = 0.003) -> str | None:
+        """The tip on the new face, within ``tol_m`` of the landing."""
+        face = self.result.posture.faces[self.finger]
+        return landed(self.model, self.finger, face, self.coord, obs, tol_m)
 
     def torques(self, obs) -> np.ndarray | None:
         t = obs.t

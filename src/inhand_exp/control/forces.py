@@ -66,6 +66,7 @@ class Squeeze:
     f_min: float
     f_max: float
     cost: np.ndarray | None = None  # per free variable: always solve the LP with this cost
+    fast: tuple | None = None  # the closed form's constants as plain floats (see _closed_form)
 
     @classmethod
     def build(cls, G: np.ndarray, mu: float, f_min: float, f_max: float = np.inf,
@@ -113,8 +114,19 @@ class Squeeze:
             cost = np.zeros(m)
             cost[fn] = 1.0
             cost[[pos[2 * i] for i in light]] = 10.0
-        return cls(np.linalg.pinv(Gr), lam0, margin, np.array(cols), tied, Gr, fn, fric, 2 * k,
-                   mu, f_min, f_max, cost)
+        pinv = np.linalg.pinv(Gr)
+        fast = None
+        if margin > 1e-9:
+            # constraints g(lam) >= bound, g linear: f_n >= f_min and mu f_n -+ f_t >= 0, so
+            # alpha >= (bound - g(lam_p)) / g(lam0) for each; every g(lam0) >= margin > 0
+            rows = [(f_min, (1.0, fn_i, 0.0, fn_i), lam0[fn_i]) for fn_i in fn]
+            for a, b in fric:
+                rows.append((0.0, (mu, a, -1.0, b), mu * lam0[a] - lam0[b]))
+                rows.append((0.0, (mu, a, 1.0, b), mu * lam0[a] + lam0[b]))
+            fast = (tuple(tuple(map(float, r)) for r in pinv), tuple(map(float, lam0)), rows,
+                    tuple(int(i) for i in fn))
+        return cls(pinv, lam0, margin, np.array(cols), tied, Gr, fn, fric, 2 * k,
+                   mu, f_min, f_max, cost, fast)
 
     @property
     def usable(self) -> bool:
@@ -154,16 +166,14 @@ class Squeeze:
         return res.x if res.status == 0 else None
 
     def _closed_form(self, w: np.ndarray) -> np.ndarray | None:
-        lp = self.pinv @ w
-        l0 = self.lam0
-        mu = self.mu
-        bounds = [0.0, float(np.max((self.f_min - lp[self.fn]) / l0[self.fn]))]
-        if len(self.fric):
-            a, b = self.fric[:, 0], self.fric[:, 1]
-            # every coefficient below is >= margin > 0
-            bounds.append(float(np.max((lp[b] - mu * lp[a]) / (mu * l0[a] - l0[b]))))
-            bounds.append(float(np.max((-lp[b] - mu * lp[a]) / (mu * l0[a] + l0[b]))))
-        red = lp + max(bounds) * l0
-        if np.max(red[self.fn]) > self.f_max:
+        """``pinv(G) w + alpha lam0`` with the least feasible ``alpha`` (plain floats)."""
+        pinv, lam0, rows, fn = self.fast
+        w0, w1, w2 = float(w[0]), float(w[1]), float(w[2])
+        lp = [p0 * w0 + p1 * w1 + p2 * w2 for p0, p1, p2 in pinv]
+        alpha = 0.0
+        for bound, (c1, i1, c2, i2), den in rows:
+            alpha = max(alpha, (bound - c1 * lp[i1] - c2 * lp[i2]) / den)
+        red = np.array([x + alpha * y for x, y in zip(lp, lam0, strict=True)])
+        if max(red[i] for i in fn) > self.f_max:
             return None
         return red

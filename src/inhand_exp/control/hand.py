@@ -77,6 +77,16 @@ class HandModel:
         """Fingertip centres (3, 2) from joint angles (6,)."""
         return np.array([f.tip(q[2 * i:2 * i + 2]) for i, f in enumerate(self.fingers)])
 
+    def surface_gap(self, finger: int, face, pose: np.ndarray, q: np.ndarray
+                    ) -> tuple[float, float]:
+        """How far finger's tip surface is off ``face`` (m, negative when pressed in) and its
+        coordinate along the face (m), from the joints and the given object pose."""
+        R = rotation(pose[2])
+        tip_O = R.T @ (self.fingers[finger].tip(q[2 * finger:2 * finger + 2]) - pose[:2])
+        surface, inward = self.shape.local_contact(face, 0.0)
+        gap = float((surface - tip_O) @ inward) - self.tip_radius
+        return gap, self.shape.coord_of(face, tip_O)
+
     def measured(self, contacts: Contacts, pose: np.ndarray, q: np.ndarray) -> Contacts:
         """``contacts`` with each coordinate taken from the measured tip and the given pose."""
         R = rotation(pose[2])

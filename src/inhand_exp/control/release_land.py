@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inhand_exp.control.flip import handover_torques, pair_holds, phase_times, strict_hold
+from inhand_exp.control.flip import handover_torques, landed, pair_holds, phase_times, strict_hold
 from inhand_exp.control.grasp import Contacts, Face, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.handover import PathTracker, hover, route_round
@@ -53,6 +53,14 @@ class Release:
         if not self.tracker.reachable(self.model, i, self.elbow, obs.pose, rotation(obs.pose[2])):
             return f"finger {i} cannot lift off its face"
         return None
+
+    def achieved(self, obs) -> str | None:
+        """The tip at least half the clearance off its face."""
+        face = self.contacts.posture.faces[self.finger]
+        gap, _ = self.model.surface_gap(self.finger, face, obs.pose, obs.q)
+        if gap >= self.clearance / 2:
+            return None
+        return f"finger {self.finger} only {gap * 1e3:.1f} mm off its face"
 
     def torques(self, obs) -> np.ndarray | None:
         un0, un1 = self.times["unload"]
@@ -126,6 +134,9 @@ class Land:
                 out.append((length, face, coord, path))
         out.sort(key=lambda c: c[0])
         return out
+
+    def achieved(self, obs, tol_m: float = 0.003) -> str | None:
+        return landed(self.model, self.finger, self.face, self.coord, obs, tol_m)
 
     def torques(self, obs) -> np.ndarray | None:
         ld0, ld1 = self.times["load"]

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from inhand_exp.control.finger import FingerTerms
 from inhand_exp.control.forces import Squeeze
 from inhand_exp.control.grasp import contact_frames, grasp_matrix, rotation
 from inhand_exp.control.hand import HandModel
@@ -103,6 +104,33 @@ def contact_force(plan: GraspPlan, lam: np.ndarray, k: int, R: np.ndarray) -> np
     return lam[2 * k] * n_W + lam[2 * k + 1] * np.array([-n_W[1], n_W[0]])
 
 
+DAMPING = 1e-4  # damped least squares near singular finger postures
+
+
+def damped_qdd(t: FingerTerms, ax: float, az: float) -> tuple[float, float]:
+    """Joint accelerations giving tip acceleration ``(ax, az)``: ``J^-1 (a - dJ/dt qd)``, damped
+    near singular postures (plain floats: this runs for every finger every step)."""
+    bx, bz = ax - t.jdx, az - t.jdz
+    a11 = t.j11 * t.j11 + t.j12 * t.j12 + DAMPING
+    a12 = t.j11 * t.j21 + t.j12 * t.j22
+    a22 = t.j21 * t.j21 + t.j22 * t.j22 + DAMPING
+    det = a11 * a22 - a12 * a12
+    yx, yz = (a22 * bx - a12 * bz) / det, (a11 * bz - a12 * bx) / det
+    return t.j11 * yx + t.j21 * yz, t.j12 * yx + t.j22 * yz
+
+
+def pushing_torque(t: FingerTerms, qdd1: float, qdd2: float, fx: float, fz: float,
+                   ox: float, oz: float) -> tuple[float, float]:
+    """``M qdd + V + g + J_c^T f``: inverse dynamics plus pushing with force ``f`` (world) at
+    the contact point, offset ``(ox, oz)`` from the tip centre (plain floats)."""
+    return (t.m11 * qdd1 + t.m12 * qdd2 + t.v1 + (t.j11 - oz) * fx + (t.j21 + ox) * fz,
+            t.m12 * qdd1 + t.m22 * qdd2 + t.v2 + (t.j12 - oz) * fx + (t.j22 + ox) * fz)
+
+
+def _terms(model: HandModel, i: int, q: np.ndarray, qd: np.ndarray) -> FingerTerms:
+    return model.fingers[i].terms(q[2 * i], q[2 * i + 1], qd[2 * i], qd[2 * i + 1])
+
+
 def push_torque(model: HandModel, i: int, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                 f_W: np.ndarray, n_W: np.ndarray) -> np.ndarray:
     """Finger ``i``'s torques (2,): inverse dynamics for ``qdd`` plus ``J_c^T f_W``.
@@ -110,22 +138,18 @@ def push_torque(model: HandModel, i: int, q: np.ndarray, qd: np.ndarray, qdd: np
     ``J_c`` is the Jacobian of the contact point, a tip radius from the tip centre along the
     inward normal ``n_W``.
     """
-    finger = model.fingers[i]
-    qi, qdi = q[2 * i:2 * i + 2], qd[2 * i:2 * i + 2]
-    off = model.tip_radius * n_W
-    Jc = finger.jacobian(qi) + np.array([[-off[1], -off[1]], [off[0], off[0]]])
-    return (finger.mass_matrix(qi) @ qdd + finger.coriolis(qi, qdi)
-            + finger.gravity_torque(qi) + Jc.T @ f_W)
+    r = model.tip_radius
+    return np.array(pushing_torque(_terms(model, i, q, qd), qdd[0], qdd[1], f_W[0], f_W[1],
+                                   r * n_W[0], r * n_W[1]))
 
 
 def follow_qdd(model: HandModel, i: int, q: np.ndarray, qd: np.ndarray, tip_O: np.ndarray,
                acc: np.ndarray, omega: float, R: np.ndarray) -> np.ndarray:
     """Joint accelerations moving finger ``i``'s tip like the object point at ``tip_O``."""
-    finger = model.fingers[i]
-    qi, qdi = q[2 * i:2 * i + 2], qd[2 * i:2 * i + 2]
-    r = R @ tip_O
-    a_tip = acc[:2] + acc[2] * np.array([-r[1], r[0]]) - omega**2 * r
-    return _solve_damped(finger.jacobian(qi), a_tip - finger.jacobian_dot_qd(qi, qdi))
+    rx, rz = R @ tip_O
+    ax = acc[0] - acc[2] * rz - omega * omega * rx
+    az = acc[1] + acc[2] * rx - omega * omega * rz
+    return np.array(damped_qdd(_terms(model, i, q, qd), ax, az))
 
 
 def repose_torques(model: HandModel, plan: GraspPlan, gains: Gains, q: np.ndarray,
@@ -140,19 +164,22 @@ def repose_torques(model: HandModel, plan: GraspPlan, gains: Gains, q: np.ndarra
     lam = plan.squeeze.solve(w_O)
     if lam is None:
         return None
-    R = rotation(pose[2])
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    ax0, az0, alpha = float(acc[0]), float(acc[1]), float(acc[2])
+    w2 = float(twist[2]) ** 2
+    r = model.tip_radius
     tau = np.zeros(6)
     for k, i in enumerate(plan.fingers):
-        qdd = follow_qdd(model, i, q, qd, plan.tips_O[k], acc, twist[2], R)
-        tau[2 * i:2 * i + 2] = push_torque(model, i, q, qd, qdd, contact_force(plan, lam, k, R),
-                                           R @ plan.normals_O[k])
+        tx, tz = plan.tips_O[k]
+        rx, rz = c * tx - s * tz, s * tx + c * tz  # R @ tip_O
+        nox, noz = plan.normals_O[k]
+        nx, nz = c * nox - s * noz, s * nox + c * noz  # R @ n_O
+        fn, ft = lam[2 * k], lam[2 * k + 1]
+        fx, fz = fn * nx - ft * nz, fn * nz + ft * nx  # f_n n + f_t rot90(n)
+        t = model.fingers[i].terms(q[2 * i], q[2 * i + 1], qd[2 * i], qd[2 * i + 1])
+        qdd1, qdd2 = damped_qdd(t, ax0 - alpha * rz - w2 * rx, az0 + alpha * rx - w2 * rz)
+        tau[2 * i], tau[2 * i + 1] = pushing_torque(t, qdd1, qdd2, fx, fz, r * nx, r * nz)
     return tau
-
-
-def _solve_damped(J: np.ndarray, b: np.ndarray, damping: float = 1e-4) -> np.ndarray:
-    """``J^-1 b`` with damped least squares near singular postures."""
-    return J.T @ np.linalg.solve(J @ J.T + damping * np.eye(2), b)
-
 
 class Repose:
     """Primitive: move the object by ``delta`` (dx, dz, dtheta) keeping every contact.
@@ -162,10 +189,12 @@ class Repose:
     """
 
     def __init__(self, model: HandModel, contacts, delta: np.ndarray, duration_s: float,
-                 gains: Gains | None = None, move_fraction: float = 0.7):
+                 gains: Gains | None = None, move_fraction: float = 0.7,
+                 tol: tuple[float, float] = (0.002, 0.02)):
         self.model, self.contacts, self.delta = model, contacts, np.asarray(delta, float)
         self.duration_s, self.gains = duration_s, gains or Gains()
         self.move_s = move_fraction * duration_s
+        self.tol = tol
 
     def start(self, obs) -> str | None:
         self.plan = GraspPlan.from_state(self.model, self.contacts, obs.pose, obs.q, self.gains)
@@ -181,6 +210,14 @@ class Repose:
             if self.model.fingers[i].ik(tip, 1 if obs.q[2 * i + 1] >= 0 else -1) is None:
                 return f"finger {i} cannot follow the object to the target pose"
         return None
+
+    def achieved(self, obs) -> str | None:
+        """Within ``tol`` (m, rad) of the goal, as observed."""
+        err = obs.pose - self.goal
+        e_m, e_rad = math.hypot(err[0], err[1]), abs((err[2] + math.pi) % (2 * math.pi) - math.pi)
+        if e_m <= self.tol[0] and e_rad <= self.tol[1]:
+            return None
+        return f"pose error {e_m * 1e3:.1f} mm, {e_rad:.3f} rad"
 
     def torques(self, obs) -> np.ndarray | None:
         ref = min_jerk(self.origin, self.goal, self.move_s, obs.t)

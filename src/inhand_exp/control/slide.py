@@ -20,6 +20,7 @@ from inhand_exp.control.repose import (
     Gains,
     GraspPlan,
     contact_force,
+    damped_qdd,
     follow_qdd,
     min_jerk,
     object_wrench,
@@ -79,6 +80,15 @@ class Slide:
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
         return None
 
+    def achieved(self, obs, tol_m: float = 0.003) -> str | None:
+        """The tip within ``tol_m`` of its target coordinate and touching the face."""
+        gap, coord = self.model.surface_gap(self.finger, self.contacts.posture.faces[self.finger],
+                                            obs.pose, obs.q)
+        if abs(coord - self.c1) <= tol_m and abs(gap) <= tol_m:
+            return None
+        return (f"finger {self.finger} at {coord:+.3f} m (target {self.c1:+.3f}), "
+                f"{gap * 1e3:.1f} mm off its face")
+
     def torques(self, obs) -> np.ndarray | None:
         model, i = self.model, self.finger
         plan = self.plan if obs.t < self.move_s else self.rest
@@ -111,8 +121,9 @@ class Slide:
         surface_O, _ = model.shape.local_contact(self.contacts.posture.faces[i], float(c[0]))
         target_W = obs.pose[:2] + R @ (surface_O - model.tip_radius * self.n_O)
         qi, qdi = obs.q[2 * i:2 * i + 2], obs.qd[2 * i:2 * i + 2]
-        J = finger.jacobian(qi)
-        tip, v_tip = finger.tip(qi), J @ qdi
+        t = finger.terms(qi[0], qi[1], qdi[0], qdi[1])
+        tip = np.array([t.x, t.z])
+        v_tip = np.array([t.j11 * qdi[0] + t.j12 * qdi[1], t.j21 * qdi[0] + t.j22 * qdi[1]])
         r = tip - obs.pose[:2]
         omega = obs.twist[2]
         v_obj = obs.twist[:2] + omega * np.array([-r[1], r[0]])  # object point at the tip
@@ -120,8 +131,4 @@ class Slide:
         e_t = float(along_W @ (target_W - tip))
         ed_t = float(cd[0]) - float(along_W @ (v_tip - v_obj))
         a_tip = a_obj + along_W * (float(cdd[0]) + self.kp * e_t + self.kd * ed_t)
-        return _solve(J, a_tip - finger.jacobian_dot_qd(qi, qdi))
-
-
-def _solve(J: np.ndarray, b: np.ndarray, damping: float = 1e-4) -> np.ndarray:
-    return J.T @ np.linalg.solve(J @ J.T + damping * np.eye(2), b)
+        return np.array(damped_qdd(t, a_tip[0], a_tip[1]))

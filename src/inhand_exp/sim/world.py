@@ -213,18 +213,9 @@ class World:
             return "object not held from opposite sides"
         return None
 
-    def unstable(self, max_speed: float = 20.0, max_joint_speed: float = 200.0) -> str | None:
+    def unstable(self) -> str | None:
         """Why the simulated state is unusable (NaN, runaway velocity), or None if it is fine."""
-        pose, twist = self.object_state()
-        q, qd = self.joint_state()
-        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))
-                and np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
-            return "non-finite state"
-        if float(np.hypot(twist[0], twist[1])) > max_speed or abs(twist[2]) > max_joint_speed:
-            return f"object velocity ran away ({twist.round(2).tolist()})"
-        if float(np.max(np.abs(qd))) > max_joint_speed:
-            return f"joint velocity ran away (max {float(np.max(np.abs(qd))):.1f} rad/s)"
-        return None
+        return state_problem(*self.object_state(), *self.joint_state())
 
     # --- stepping ---------------------------------------------------------------------------
 
@@ -270,3 +261,20 @@ def _finger_text(hand: HandConfig) -> str:
 def wrap_angle(a: float) -> float:
     """Angle in [-pi, pi)."""
     return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def state_problem(pose: np.ndarray, twist: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                  max_speed: float = 20.0, max_joint_speed: float = 200.0) -> str | None:
+    """Why a simulated state is unusable (NaN, runaway velocity), or None if it is fine.
+
+    Speeds in m/s for the object, rad/s for its rotation and the joints.
+    """
+    values = (*pose, *twist, *q, *qd)
+    if not all(math.isfinite(v) for v in values):
+        return "non-finite state"
+    if math.hypot(twist[0], twist[1]) > max_speed or abs(twist[2]) > max_joint_speed:
+        return f"object velocity ran away ({np.round(twist, 2).tolist()})"
+    fastest = max(abs(v) for v in qd)
+    if fastest > max_joint_speed:
+        return f"joint velocity ran away (max {fastest:.1f} rad/s)"
+    return None

@@ -20,6 +20,7 @@ from functools import partial
 
 import numpy as np
 from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
 from omegaconf import DictConfig
 
 from inhand_exp.bench import trials
@@ -169,12 +170,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--primitive-runs", type=int, default=5,
                         help="speed: runs per primitive for the wall time")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. sim.timestep_s=0.002")
-    args = parser.parse_args(argv)
+    args = parser.parse_intermixed_args(argv)
     if args.trials is not None and args.trials <= 0:
         parser.error(f"--trials must be > 0, got {args.trials}")
     try:
         cfg = load_config(args.object, args.overrides)
-    except ConfigError as err:
-        sys.exit(f"inhand-bench: config error: {err}")
+    except (ConfigError, ConfigCompositionException) as err:
+        sys.exit(f"inhand-bench: config error: {err}".splitlines()[0])
     result = speed(args, cfg) if args.what == "speed" else primitives(args, cfg)
     print(json.dumps(result))

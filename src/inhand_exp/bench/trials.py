@@ -181,37 +181,39 @@ def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 400)
                  time.perf_counter() - t)
 
 
-def release(b: Bench, rng: np.random.Generator) -> Trial | None:
-    """Release of a random finger whose release the primitive's own check allows."""
+def _releasable(b: Bench, rng: np.random.Generator) -> tuple[int, Release] | None:
+    """A random grasp and a random finger whose release the primitive's own check allows."""
     contacts = b.start(rng)
     for finger in rng.permutation(3):
         prim = Release(b.model, contacts, int(finger), b.durations["release"])
         if _feasible(prim, b.observe()):
-            break
-    else:
+            return int(finger), prim
+    return None
+
+
+def release(b: Bench, rng: np.random.Generator) -> Trial | None:
+    """A release of one finger while the other two hold the object."""
+    found = _releasable(b, rng)
+    if found is None:
         return None
+    finger, prim = found
     start = b.world.object_pose()
     t = time.perf_counter()
     out = execute(b.world, prim, b.offset(rng))
     touching = set(b.faces())
     em, er = _pose_error(b.world.object_pose(), start)
-    ok = out.ok and int(finger) not in touching and len(touching) == 2
+    ok = out.ok and finger not in touching and len(touching) == 2
     return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
                  time.perf_counter() - t)
 
 
 def land(b: Bench, rng: np.random.Generator) -> Trial | None:
     """Land after a successful release (the release itself is not scored here)."""
-    contacts = b.start(rng)
-    for finger in rng.permutation(3):
-        prim = Release(b.model, contacts, int(finger), b.durations["release"])
-        if _feasible(prim, b.observe()):
-            break
-    else:
+    found = _releasable(b, rng)
+    if found is None or not execute(b.world, found[1]).ok:
         return None
-    if not execute(b.world, prim).ok:
-        return None
-    prim = Land(b.model, prim.result, int(finger), b.durations["land"])
+    finger, released = found
+    prim = Land(b.model, released.result, finger, b.durations["land"])
     if not _feasible(prim, b.observe()):
         return None
     start = b.world.object_pose()

@@ -9,6 +9,7 @@ point, plus ``J_c^T f`` to push with its share of the force. Hold is a repose to
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -43,6 +44,12 @@ class GraspPlan:
     normals_O: np.ndarray  # (k, 2) inward normals, object frame
     tips_O: np.ndarray  # (k, 2) fingertip centres from the COM, object frame (m)
     squeeze: Squeeze
+
+    @functools.cached_property
+    def floats(self) -> tuple[tuple[int, float, float, float, float], ...]:
+        """Per contact ``(finger, tip_x, tip_z, normal_x, normal_z)`` in O, as plain floats."""
+        return tuple((i, *map(float, t), *map(float, n))
+                     for i, t, n in zip(self.fingers, self.tips_O, self.normals_O, strict=True))
 
     @classmethod
     def from_state(cls, model: HandModel, contacts, pose: np.ndarray, q: np.ndarray,
@@ -89,13 +96,16 @@ def object_wrench(model: HandModel, gains: Gains, pose: np.ndarray, twist: np.nd
     The wrench is what the contacts must apply on the nominal object: ``M a + (0, m g, 0)``.
     """
     p_ref, v_ref, a_ref = ref
-    err = p_ref - pose
-    err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
-    acc = a_ref + gains.kd * (v_ref - twist) + gains.kp * err
+    kp, kd = gains.kp, gains.kd
+    e_th = (p_ref[2] - pose[2] + math.pi) % (2 * math.pi) - math.pi
+    ax = a_ref[0] + kd * (v_ref[0] - twist[0]) + kp * (p_ref[0] - pose[0])
+    az = a_ref[1] + kd * (v_ref[1] - twist[1]) + kp * (p_ref[1] - pose[1])
+    al = a_ref[2] + kd * (v_ref[2] - twist[2]) + kp * e_th
     shape = model.shape
-    R = rotation(pose[2])
-    F_W = shape.mass_kg * np.array([acc[0], acc[1] + model.fingers[0].gravity])
-    return acc, np.array([*(R.T @ F_W), shape.inertia * acc[2]])
+    fx, fz = shape.mass_kg * ax, shape.mass_kg * (az + model.fingers[0].gravity)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return (np.array([ax, az, al]),
+            np.array([c * fx + s * fz, -s * fx + c * fz, shape.inertia * al]))
 
 
 def contact_force(plan: GraspPlan, lam: np.ndarray, k: int, R: np.ndarray) -> np.ndarray:
@@ -169,10 +179,9 @@ def repose_torques(model: HandModel, plan: GraspPlan, gains: Gains, q: np.ndarra
     w2 = float(twist[2]) ** 2
     r = model.tip_radius
     tau = np.zeros(6)
-    for k, i in enumerate(plan.fingers):
-        tx, tz = plan.tips_O[k]
+    lam = lam.tolist()
+    for k, (i, tx, tz, nox, noz) in enumerate(plan.floats):
         rx, rz = c * tx - s * tz, s * tx + c * tz  # R @ tip_O
-        nox, noz = plan.normals_O[k]
         nx, nz = c * nox - s * noz, s * nox + c * noz  # R @ n_O
         fn, ft = lam[2 * k], lam[2 * k + 1]
         fx, fz = fn * nx - ft * nz, fn * nz + ft * nx  # f_n n + f_t rot90(n)

@@ -221,12 +221,11 @@ class World:
 
     def step(self, tau: np.ndarray) -> None:
         """Apply joint torques ``tau`` (6,) (N m, clipped to the limit) for one physics step."""
-        cid = self._cid
-        tau = np.clip(tau, -self.max_torque, self.max_torque)
+        cid, hi = self._cid, self.max_torque
+        tau = [min(hi, max(-hi, v)) for v in tau.tolist()]
         for i, f in enumerate(self.fingers):
             pb.setJointMotorControlArray(f, (0, 1), pb.TORQUE_CONTROL,
-                                         forces=(float(tau[2 * i]), float(tau[2 * i + 1])),
-                                         physicsClientId=cid)
+                                         forces=tau[2 * i:2 * i + 2], physicsClientId=cid)
         t = time.perf_counter()
         pb.stepSimulation(physicsClientId=cid)
         self.step_wall_s += time.perf_counter() - t

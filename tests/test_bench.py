@@ -1,0 +1,56 @@
+"""``inhand-bench`` smoke runs: the last line is JSON with the documented keys; bad input fails."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from inhand_exp.bench.cli import main
+
+RESULT_KEYS = {"trials", "success_rate", "drop_rate", "mean_err_m", "max_err_m", "mean_err_rad",
+               "max_err_rad", "sim_s", "wall_s"}
+
+
+def last_json(capsys) -> dict:
+    return json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+
+
+def test_primitives_prints_json_with_the_documented_keys(capsys):
+    main(["primitives", "--only", "repose,slide", "--trials", "2", "--seed", "3"])
+    out = last_json(capsys)
+    assert out["object"] == "pole"
+    assert set(out["results"]) == {"repose", "slide"}
+    for res in out["results"].values():
+        assert set(res) >= RESULT_KEYS and res["trials"] == 2
+        assert 0.0 <= res["success_rate"] <= 1.0 and 0.0 <= res["drop_rate"] <= 1.0
+
+
+def test_results_do_not_depend_on_the_number_of_workers(capsys):
+    main(["primitives", "--only", "repose", "--trials", "3"])
+    one = last_json(capsys)["results"]["repose"]
+    main(["primitives", "--only", "repose", "--trials", "3", "--workers", "2"])
+    two = last_json(capsys)["results"]["repose"]
+    assert one["mean_err_m"] == two["mean_err_m"] and one["sim_s"] == two["sim_s"]
+
+
+def test_cube_sections(capsys):
+    main(["primitives", "--object", "cube", "--only", "hold,release", "--trials", "1"])
+    assert set(last_json(capsys)["results"]) == {"hold", "release"}
+
+
+def test_speed_reports_rates_and_their_ratio(capsys):
+    main(["speed", "--seconds", "0.3", "--primitive-runs", "1"])
+    out = last_json(capsys)
+    assert out["raw_steps_per_s"] > out["loop_steps_per_s"] > 0
+    assert out["ratio"] == pytest.approx(out["loop_steps_per_s"] / out["raw_steps_per_s"])
+    assert {"repose", "slide"} <= set(out["ms_per_primitive"])
+
+
+def test_bad_input_is_refused():
+    with pytest.raises(SystemExit, match="2"):
+        main(["primitives", "--trials", "0"])
+    with pytest.raises(SystemExit, match="object.mass_kg must be > 0"):
+        main(["primitives", "object.mass_kg=-1"])
+    with pytest.raises(SystemExit, match="Could not override 'sim.timestep'"):
+        main(["primitives", "sim.timestep=0.01"])

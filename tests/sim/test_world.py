@@ -7,9 +7,10 @@ import pybullet as pb
 import pytest
 
 from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
+from inhand_exp.control.execute import Observation
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.repose import Gains, GraspPlan, min_jerk, repose_torques
+from inhand_exp.control.repose import Gains, GraspPlan, Repose, min_jerk, repose_torques
 from inhand_exp.sim.world import BODY_LINK, TIP_LINK, ObjectSpec, World
 
 SIM, HAND, OBJ = SimConfig(), HandConfig(), ObjectConfig()
@@ -222,3 +223,35 @@ def test_finger_links_never_touch_object(link, z):
                            for p in pb.getContactPoints(w.object, f, physicsClientId=cid))
         finally:
             w.close()
+
+
+def test_contact_forces_balance_an_external_push():
+    """Held still while pushed along +x, the measured contact forces on the object must sum to
+    the push reversed plus the weight: a check of every contact's tangential sign."""
+    sim, hand, obj = SimConfig(), HandConfig(), ObjectConfig()
+    world = World(sim, hand, ObjectSpec.from_config(obj))
+    model = HandModel.from_config(hand, obj, sim.gravity_mps2)
+    contacts = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
+    pose = np.array([0.0, 0.2, 0.0])
+    world.reset(pose, model.grasp_q(contacts, pose, press=0.0005))
+    hold = Repose(model, contacts, np.zeros(3), 2.0)
+
+    def observe(t):
+        p, tw = world.object_state()
+        q, qd = world.joint_state()
+        return Observation(q, qd, p, tw, t)
+
+    hold.start(observe(0.0))
+    push = 0.3
+    for k in range(480):
+        pb.applyExternalForce(world.object, 2, [push, 0, 0], [0, 0, 0], pb.LINK_FRAME,
+                              physicsClientId=world.client)
+        world.step(hold.torques(observe(k * world.dt)))
+    total = sum(c.normal_force * c.normal + c.tangential_force * c.tangent
+                for c in world.contacts())
+    weight = obj.mass_kg * sim.gravity_mps2
+    assert len(world.contacts()) == 3
+    np.testing.assert_allclose(total, [-push, weight], atol=0.02 * weight)
+    # the push is shared: each finger's tangential force opposes it
+    assert all(c.tangential_force * c.tangent[0] < 0 for c in world.contacts())
+    world.close()

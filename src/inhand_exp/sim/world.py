@@ -184,18 +184,29 @@ class World:
         return out
 
     def contacts(self) -> list[Contact]:
-        """Fingertip-object contacts with the forces the solver applied in the last step."""
+        """Fingertip-object contacts with the forces the solver applied in the last step.
+
+        PyBullet reports each contact in the order its solver holds the pair, and a query
+        filtered by body swaps the ids and the normal but not the friction directions; so the
+        unfiltered list is read and each contact is turned to act on the object.
+        """
         out = []
-        for c in pb.getContactPoints(bodyA=self.object, linkIndexA=BODY_LINK,
-                                     physicsClientId=self._cid):
-            if c[4] != TIP_LINK or c[2] not in self.fingers:
+        obj = self.object
+        for c in pb.getContactPoints(physicsClientId=self._cid):
+            a, b, link_a, link_b = c[1], c[2], c[3], c[4]
+            if a == obj and link_a == BODY_LINK and b in self.fingers and link_b == TIP_LINK:
+                sign, finger, point = 1.0, b, c[5]
+            elif b == obj and link_b == BODY_LINK and a in self.fingers and link_a == TIP_LINK:
+                sign, finger, point = -1.0, a, c[6]
+            else:
                 continue
-            normal = np.array([c[7][0], c[7][2]])  # contactNormalOnB: from the tip B to A
-            normal = normal / (float(np.hypot(*normal)) or 1.0)
+            # contactNormalOnB points from B to A; the forces reported act on A
+            normal = sign * np.array([c[7][0], c[7][2]])
+            normal /= float(np.hypot(*normal)) or 1.0
+            lateral = sign * (c[10] * np.array(c[11]) + c[12] * np.array(c[13]))
             tangent = np.array([-normal[1], normal[0]])
-            lateral = c[10] * np.array(c[11]) + c[12] * np.array(c[13])
-            out.append(Contact(self.fingers.index(c[2]), np.array([c[6][0], c[6][2]]), normal,
-                               float(c[9]), float(tangent @ lateral[[0, 2]])))
+            out.append(Contact(self.fingers.index(finger), np.array([point[0], point[2]]),
+                               normal, float(c[9]), float(tangent @ lateral[[0, 2]])))
         return out
 
     def grasp_lost(self) -> str | None:

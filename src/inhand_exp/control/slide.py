@@ -42,12 +42,13 @@ class Slide:
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, dc: float,
                  duration_s: float, gains: Gains | None = None, kp: float = 900.0,
                  kd: float = 60.0, move_fraction: float = 0.7,
-                 max_push_n: float = 1.5):
+                 max_push_n: float = 1.5, min_bend: float = 0.3):
         self.model, self.contacts, self.finger, self.dc = model, contacts, finger, dc
         self.duration_s, self.gains = duration_s, gains or Gains()
         self.kp, self.kd = kp, kd
         self.move_s = move_fraction * duration_s
         self.max_push = max_push_n
+        self.min_bend = min_bend  # |sin q2| at the end: away from the straight-finger singularity
 
     def start(self, obs) -> str | None:
         model, c, i = self.model, self.contacts, self.finger
@@ -78,6 +79,13 @@ class Slide:
             return f"the grasp after the slide of finger {i} cannot hold the object"
         self.origin = obs.pose.copy()
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
+        surface, _ = model.shape.local_contact(face, self.c1)
+        end = obs.pose[:2] + rotation(obs.pose[2]) @ (surface - model.tip_radius * self.n_O)
+        q_end = model.fingers[i].ik(end, self.elbow)
+        if q_end is None:
+            return f"finger {i} cannot reach the end of the slide"
+        if abs(np.sin(q_end[1])) < self.min_bend:
+            return f"finger {i} would end the slide stretched nearly straight"
         return None
 
     def achieved(self, obs, tol_m: float = 0.003) -> str | None:

@@ -54,3 +54,12 @@ def test_bad_input_is_refused():
         main(["primitives", "object.mass_kg=-1"])
     with pytest.raises(SystemExit, match="Could not override 'sim.timestep'"):
         main(["primitives", "sim.timestep=0.01"])
+
+
+def test_primitive_gains_come_from_the_config():
+    from inhand_exp.bench.cli import load_config
+    from inhand_exp.bench.trials import Bench
+
+    bench = Bench(load_config("pole", ["primitives.kp=100", "primitives.min_normal_force_n=0.2",
+                                       "primitives.friction_margin=0.7"]))
+    assert (bench.gains.kp, bench.gains.f_min, bench.gains.friction_margin) == (100, 0.2, 0.7)

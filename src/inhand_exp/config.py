@@ -119,6 +119,8 @@ class PrimitivesConfig:
     kp: float = spec(400.0, "Object-pose PD stiffness (1/s^2).", ge=0)
     kd: float = spec(40.0, "Object-pose PD damping (1/s).", ge=0)
     min_normal_force_n: float = spec(0.5, "Least normal force at every held contact (N).", ge=0)
+    max_normal_force_n: float = spec(50.0, "Most normal force a plan may ask of a contact (N).",
+                                     gt=0)
     friction_margin: float = spec(0.8, "Fraction of the friction cone the controller may use.",
                                   gt=0)
 

@@ -134,7 +134,7 @@ def speed(args, cfg: DictConfig) -> dict:
     deadline = time.perf_counter() + args.seconds
     while time.perf_counter() < deadline:
         contacts = bench.start(rng)
-        prim = trials.Repose(bench.model, contacts, np.zeros(3), 2.0)
+        prim = trials.Repose(bench.model, contacts, np.zeros(3), 2.0, bench.gains)
         world.step_wall_s = 0.0
         t = time.perf_counter()
         out = trials.execute(world, prim)

@@ -19,7 +19,7 @@ from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.release_land import Land, Release
-from inhand_exp.control.repose import Repose
+from inhand_exp.control.repose import Gains, Repose
 from inhand_exp.control.sample import random_grasp
 from inhand_exp.control.slide import Slide
 from inhand_exp.sim.world import ObjectSpec, World, wrap_angle
@@ -58,6 +58,7 @@ class Bench:
                                 obj.mass_kg * p.mass_scale, obj.friction)
         self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
         prim = cfg.primitives
+        self.gains = Gains.from_config(prim)
         self.durations = {"repose": prim.repose_duration_s, "slide": prim.slide_duration_s,
                           "flip": prim.flip_duration_s, "release": prim.release_duration_s,
                           "land": prim.land_duration_s}
@@ -101,7 +102,8 @@ def hold(b: Bench, rng: np.random.Generator) -> Trial:
     contacts = b.start(rng)
     start = b.world.object_pose()
     t = time.perf_counter()
-    out = execute(b.world, Repose(b.model, contacts, np.zeros(3), HOLD_S), b.offset(rng))
+    out = execute(b.world, Repose(b.model, contacts, np.zeros(3), HOLD_S, b.gains),
+                  b.offset(rng))
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and em <= HOLD_TOL[0] and er <= HOLD_TOL[1]
     return Trial(ok, not out.ok and out.reason != "infeasible", em, er, out.sim_time_s,
@@ -124,7 +126,7 @@ def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
     offset = b.offset(rng)
     for k in rng.permutation(6):
         delta = _unit_reposes(b)[k]
-        prim = Repose(b.model, contacts, delta, b.durations["repose"])
+        prim = Repose(b.model, contacts, delta, b.durations["repose"], b.gains)
         obs = b.observe()
         if _feasible(prim, Observation(obs.q, obs.qd, obs.pose + offset, obs.twist, 0.0)):
             break
@@ -145,7 +147,7 @@ def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
     dc = b.steps["slide"]
     for k in rng.permutation(6):
         finger, sign = int(k // 2), (1 if k % 2 == 0 else -1)
-        prim = Slide(b.model, contacts, finger, sign * dc, b.durations["slide"])
+        prim = Slide(b.model, contacts, finger, sign * dc, b.durations["slide"], b.gains)
         if _feasible(prim, b.observe()):
             break
     else:
@@ -165,7 +167,7 @@ def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 400)
     """A flip of ``finger`` from a random grasp where the flip's own check allows it."""
     for _ in range(max_grasps):
         contacts = b.start(rng)
-        prim = Flip(b.model, contacts, finger, b.durations["flip"])
+        prim = Flip(b.model, contacts, finger, b.durations["flip"], b.gains)
         if _feasible(prim, b.observe()):
             break
     else:
@@ -185,7 +187,7 @@ def _releasable(b: Bench, rng: np.random.Generator) -> tuple[int, Release] | Non
     """A random grasp and a random finger whose release the primitive's own check allows."""
     contacts = b.start(rng)
     for finger in rng.permutation(3):
-        prim = Release(b.model, contacts, int(finger), b.durations["release"])
+        prim = Release(b.model, contacts, int(finger), b.durations["release"], b.gains)
         if _feasible(prim, b.observe()):
             return int(finger), prim
     return None
@@ -213,7 +215,7 @@ def land(b: Bench, rng: np.random.Generator) -> Trial | None:
     if found is None or not execute(b.world, found[1]).ok:
         return None
     finger, released = found
-    prim = Land(b.model, released.result, finger, b.durations["land"])
+    prim = Land(b.model, released.result, finger, b.durations["land"], b.gains)
     if not _feasible(prim, b.observe()):
         return None
     start = b.world.object_pose()

@@ -31,6 +31,12 @@ class Gains:
     f_max: float = 50.0
     friction_margin: float = 0.8
 
+    @classmethod
+    def from_config(cls, prim) -> Gains:
+        """From the ``primitives`` config group."""
+        return cls(prim.kp, prim.kd, prim.min_normal_force_n, prim.max_normal_force_n,
+                   prim.friction_margin)
+
 
 @dataclass(frozen=True)
 class GraspPlan:

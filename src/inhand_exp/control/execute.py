@@ -107,6 +107,9 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
         elif (k + 1) * world.dt - lost_since >= drop_grace_s:
             return Outcome(False, "lost_contact", lost, (k + 1) * world.dt, k + 1)
     pose, twist, q, qd = read()
+    bad = state_check(pose, twist, q, qd)
+    if bad is not None:
+        return Outcome(False, "unstable", bad, n * world.dt, n)
     missing = primitive.achieved(Observation(q, qd, pose + offset, twist, n * world.dt))
     if missing is not None:
         return Outcome(False, "timeout", missing, n * world.dt, n)

@@ -1,0 +1,85 @@
+"""The discrete mid-level actions (paper Table I), generated from the ``primitives`` config.
+
+Pole: repose +-x, +-z, +-theta; slide +-dC for each finger; flip left (finger 0) and flip right
+(finger 2): 14 actions. Cube: the 6 reposes, then release and land for each finger: 12 actions.
+Each action becomes a fresh primitive for the current contact configuration; a primitive's
+``start`` is its own feasibility check (inverse kinematics, joint limits, force distribution).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from inhand_exp.control.execute import Observation, Primitive
+from inhand_exp.control.flip import Flip
+from inhand_exp.control.grasp import Contacts
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.release_land import Land, Release
+from inhand_exp.control.repose import Gains, Repose
+from inhand_exp.control.slide import Slide
+
+
+@dataclass(frozen=True)
+class Action:
+    """One discrete action: its kind, name and parameters (SI units)."""
+
+    index: int
+    kind: str  # repose, slide, flip, release, land
+    name: str
+    delta: tuple[float, float, float] = (0.0, 0.0, 0.0)  # repose: (dx m, dz m, dtheta rad)
+    finger: int = -1
+    dc: float = 0.0  # slide: m along the face
+
+
+def action_table(prim) -> tuple[Action, ...]:
+    """The actions the ``primitives`` config offers, in a fixed order."""
+    dx, dz, dth = prim.repose_dx_m, prim.repose_dz_m, prim.repose_dtheta_rad
+    specs: list[dict] = [
+        dict(kind="repose", name=name, delta=delta) for name, delta in (
+            ("repose +x", (dx, 0.0, 0.0)), ("repose -x", (-dx, 0.0, 0.0)),
+            ("repose +z", (0.0, dz, 0.0)), ("repose -z", (0.0, -dz, 0.0)),
+            ("repose +theta", (0.0, 0.0, dth)), ("repose -theta", (0.0, 0.0, -dth)))]
+    if prim.slide:
+        specs += [dict(kind="slide", name=f"slide finger {i} {'+' if s > 0 else '-'}",
+                       finger=i, dc=s * prim.slide_dc_m) for i in range(3) for s in (1, -1)]
+    if prim.flip:
+        specs += [dict(kind="flip", name="flip left", finger=0),
+                  dict(kind="flip", name="flip right", finger=2)]
+    if prim.release_land:
+        specs += [dict(kind="release", name=f"release finger {i}", finger=i) for i in range(3)]
+        specs += [dict(kind="land", name=f"land finger {i}", finger=i) for i in range(3)]
+    return tuple(Action(index=k, **spec) for k, spec in enumerate(specs))
+
+
+def make_primitive(action: Action, model: HandModel, contacts: Contacts, gains: Gains,
+                   prim) -> Primitive:
+    """A fresh primitive carrying out ``action`` from ``contacts``."""
+    if action.kind == "repose":
+        return Repose(model, contacts, np.array(action.delta), prim.repose_duration_s, gains)
+    if action.kind == "slide":
+        return Slide(model, contacts, action.finger, action.dc, prim.slide_duration_s, gains)
+    if action.kind == "flip":
+        return Flip(model, contacts, action.finger, prim.flip_duration_s, gains)
+    if action.kind == "release":
+        return Release(model, contacts, action.finger, prim.release_duration_s, gains)
+    if action.kind == "land":
+        return Land(model, contacts, action.finger, prim.land_duration_s, gains)
+    raise ValueError(f"unknown action kind {action.kind!r}")
+
+
+def feasibility(actions: tuple[Action, ...], model: HandModel, contacts: Contacts,
+                gains: Gains, prim, obs: Observation) -> tuple[np.ndarray, list]:
+    """Which actions the filter allows in ``obs``, and the primitives already planned for them.
+
+    An action is feasible when its primitive's ``start`` accepts the observed state; the
+    planned primitive is returned so that carrying the action out needs no second plan.
+    """
+    mask = np.zeros(len(actions), dtype=bool)
+    planned: list = [None] * len(actions)
+    for a in actions:
+        p = make_primitive(a, model, contacts, gains, prim)
+        if p.start(obs) is None:
+            mask[a.index], planned[a.index] = True, p
+    return mask, planned

@@ -1,0 +1,147 @@
+"""Goal datasets (paper section IV-B): (X0, Xg) pairs in three groups, deterministic from a seed.
+
+- easy: Xg is reachable by reposing alone from the initial contacts (every pose on the straight
+  path from X0 to Xg is reachable with those contacts and the grasp holds);
+- medium: Xg is reachable with the same posture (which face each finger is on) and other
+  contact coordinates, so sliding may be needed;
+- hard: Xg is reachable with some grasp of any posture, so some goals need a flip.
+
+Pair ``i`` of a split is drawn from its own generator seeded by (seed, group, split, i), so a set
+does not depend on how many pairs are drawn or in what order, and the test set (split "test")
+never overlaps the training distribution (split "train") by construction of the streams.
+Feasibility uses the controllers' own model (inverse kinematics within the joint limits and a
+squeeze strictly inside the friction cones), as the feasibility filter does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from inhand_exp.control.grasp import Contacts, Face, Posture
+from inhand_exp.control.hand import GeometryError, HandModel
+from inhand_exp.control.sample import POSE_HIGH, POSE_LOW, holds_strictly, random_grasp
+
+GROUPS = ("easy", "medium", "hard")
+SPLITS = ("train", "test")
+COLUMNS = ("group", "x0_x", "x0_z", "x0_theta", "xg_x", "xg_z", "xg_theta",
+           "faces", "c0", "c1", "c2")
+EASY_STEP = np.array([0.06, 0.06, 0.6])  # largest easy offset (m, m, rad)
+
+
+class GoalsError(ValueError):
+    """A goal file that cannot be used, with the row and column at fault."""
+
+
+@dataclass(frozen=True)
+class GoalPair:
+    """An initial pose and grasp, and a goal pose (m, m, rad)."""
+
+    group: str
+    x0: np.ndarray
+    xg: np.ndarray
+    contacts: Contacts
+
+
+def reachable(model: HandModel, contacts: Contacts, pose: np.ndarray) -> bool:
+    """The grasp ``contacts`` can hold the object at ``pose`` (IK within limits, squeeze)."""
+    try:
+        q = model.grasp_q(contacts, pose)
+    except GeometryError:
+        return False
+    return all(f.within_limits(q[2 * i:2 * i + 2], margin=0.05)
+               for i, f in enumerate(model.fingers))
+
+
+def _apart(x0: np.ndarray, xg: np.ndarray, tol: tuple[float, float]) -> bool:
+    """Not already solved: outside the success tolerance."""
+    return bool(max(abs(xg[0] - x0[0]), abs(xg[1] - x0[1])) >= tol[0]
+                or abs(xg[2] - x0[2]) >= tol[1])
+
+
+def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
+                tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500) -> GoalPair:
+    """One pair of ``group``, by rejection sampling."""
+    if group not in GROUPS:
+        raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
+    for _ in range(max_tries):
+        x0, c0, _ = random_grasp(model, rng)
+        if group == "easy":
+            xg = x0 + rng.uniform(-EASY_STEP, EASY_STEP)
+            path = [x0 + (xg - x0) * s for s in np.linspace(0.2, 1.0, 5)]
+            ok = all(reachable(model, c0, p) for p in path)
+        elif group == "medium":
+            xg = rng.uniform(POSE_LOW, POSE_HIGH)
+            half = model.shape.length_m / 2 - 3 * model.tip_radius
+            coords = tuple(float(c) for c in rng.uniform(-half, half, 3))
+            cg = Contacts(c0.posture, coords)
+            ok = holds_strictly(model, cg) and reachable(model, cg, xg)
+        else:
+            xg, _, _ = random_grasp(model, rng)
+            ok = True
+        if ok and _apart(x0, xg, tol):
+            return GoalPair(group, x0, xg, c0)
+    raise GeometryError(f"no {group} goal pair found in {max_tries} tries")
+
+
+def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test"
+             ) -> list[GoalPair]:
+    """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i)."""
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    g, s = GROUPS.index(group), SPLITS.index(split)
+    return [sample_pair(model, group, np.random.default_rng([seed, g, s, i])) for i in range(n)]
+
+
+def to_frame(pairs: list[GoalPair]) -> pd.DataFrame:
+    rows = [(p.group, *p.x0, *p.xg, str(p.contacts.posture), *p.contacts.coords) for p in pairs]
+    return pd.DataFrame(rows, columns=list(COLUMNS))
+
+
+def save_goals(pairs: list[GoalPair], path: str | Path) -> Path:
+    """Write the pairs as CSV (one row per episode); refuses to overwrite."""
+    path = Path(path)
+    if path.exists():
+        raise FileExistsError(f"{path} exists; goal sets are never overwritten")
+    to_frame(pairs).to_csv(path, index=False, float_format="%.9g")
+    return path
+
+
+def load_goals(path: str | Path) -> list[GoalPair]:
+    """Read a goal CSV written by ``save_goals`` or by hand; errors name the row and column."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"goal file {path} not found")
+    if path.suffix.lower() != ".csv":
+        raise GoalsError(f"{path}: goal files are CSV (got {path.suffix!r})")
+    try:
+        df = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise GoalsError(f"{path}: not a readable CSV ({err})") from None
+    missing = [c for c in COLUMNS if c not in df.columns]
+    if missing:
+        raise GoalsError(f"{path}: missing column(s) {', '.join(missing)}")
+    pairs = []
+    faces_by_name = {f.name.lower(): f for f in Face}
+    for row, r in enumerate(df.itertuples(index=False), start=2):  # line 1 is the header
+        try:
+            values = [float(getattr(r, c)) for c in COLUMNS if c not in ("group", "faces")]
+        except (TypeError, ValueError) as err:
+            raise GoalsError(f"{path} line {row}: a pose or contact is not a number ({err})") \
+                from None
+        if not all(np.isfinite(values)):
+            raise GoalsError(f"{path} line {row}: non-finite pose or contact value")
+        if r.group not in GROUPS:
+            raise GoalsError(f"{path} line {row}: group must be one of {GROUPS}, "
+                             f"got {r.group!r}")
+        names = str(r.faces).split("/")
+        if len(names) != 3 or any(n not in faces_by_name for n in names):
+            raise GoalsError(f"{path} line {row}: faces must be three of "
+                             f"{sorted(faces_by_name)} joined by '/', got {r.faces!r}")
+        posture = Posture(tuple(faces_by_name[n] for n in names))
+        pairs.append(GoalPair(r.group, np.array(values[0:3]), np.array(values[3:6]),
+                              Contacts(posture, tuple(values[6:9]))))
+    return pairs

@@ -1,0 +1,66 @@
+"""Success, rewards and the paper's "useful flip" (section IV-A), from the simulated state."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from inhand_exp.control.grasp import Contacts, contact_frames, cross2
+from inhand_exp.control.hand import HandModel
+
+
+@dataclass(frozen=True)
+class Rules:
+    """Tolerances (m, rad), rewards and the time limit in mid-level actions."""
+
+    success_tol_m: float = 0.01
+    success_tol_rad: float = 0.1
+    reward_goal: float = 5.0
+    reward_invalid: float = -0.01
+    reward_flip: float = 1.0
+    max_actions: int = 50
+
+    @classmethod
+    def from_config(cls, task) -> Rules:
+        return cls(task.success_tol_m, task.success_tol_rad, task.reward_goal,
+                   task.reward_invalid, task.reward_flip, task.max_actions)
+
+
+def pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float, float]:
+    """|dx|, |dz| (m) and |dtheta| (rad, wrapped) between two poses."""
+    dth = (float(goal[2]) - float(pose[2]) + math.pi) % (2 * math.pi) - math.pi
+    return abs(float(goal[0]) - float(pose[0])), abs(float(goal[1]) - float(pose[1])), abs(dth)
+
+
+def reached(pose: np.ndarray, goal: np.ndarray, rules: Rules) -> bool:
+    """Success: |dx|, |dz| < tol_m and |dtheta| < tol_rad (paper: 1 cm, 0.1 rad)."""
+    ex, ez, eth = pose_error(pose, goal)
+    return ex < rules.success_tol_m and ez < rules.success_tol_m and eth < rules.success_tol_rad
+
+
+def flip_useful(model: HandModel, contacts: Contacts, finger: int, pose: np.ndarray,
+                goal: np.ndarray) -> bool:
+    """After a flip: the flipped finger pushes so as to turn the object towards the goal angle.
+
+    The paper calls a flip useful when the flipped finger's normal is aligned with the
+    direction of ``theta_g - theta_t``; we read that as the torque of a push along the finger's
+    inward normal, about the object's centre of mass, having the sign of the angle still to go.
+    """
+    pts, nrm = contact_frames(model.shape, contacts, pose)
+    torque = cross2(pts[finger] - pose[:2], nrm[finger])
+    to_go = (float(goal[2]) - float(pose[2]) + math.pi) % (2 * math.pi) - math.pi
+    return torque * to_go > 0
+
+
+def reward(rules: Rules, *, valid: bool, success: bool, useful_flip: bool) -> float:
+    """The paper's reward: +5 goal, -0.01 invalid action, +1 useful successful flip."""
+    r = 0.0
+    if not valid:
+        r += rules.reward_invalid
+    if useful_flip:
+        r += rules.reward_flip
+    if success:
+        r += rules.reward_goal
+    return r

@@ -1,0 +1,97 @@
+"""The action table follows the config; the feasibility mask agrees with what execution does."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from inhand_exp.control.execute import Observation, execute
+from inhand_exp.control.grasp import Contacts, Face, Posture
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.repose import Gains
+from inhand_exp.control.sample import random_grasp
+from inhand_exp.sim.world import ObjectSpec, World
+from inhand_exp.task.actions import action_table, feasibility, make_primitive
+
+
+def test_pole_table_is_the_papers_fourteen(compose_cfg):
+    actions = action_table(compose_cfg().primitives)
+    assert len(actions) == 14
+    assert [a.index for a in actions] == list(range(14))
+    kinds = [a.kind for a in actions]
+    assert kinds.count("repose") == 6 and kinds.count("slide") == 6 and kinds.count("flip") == 2
+    assert {a.name for a in actions if a.kind == "flip"} == {"flip left", "flip right"}
+    assert [a.finger for a in actions if a.kind == "flip"] == [0, 2]
+
+
+def test_cube_table_has_release_and_land_and_no_slides(compose_cfg):
+    actions = action_table(compose_cfg("object=cube").primitives)
+    assert [a.kind for a in actions].count("repose") == 6
+    assert sorted((a.kind, a.finger) for a in actions if a.kind in ("release", "land")) == [
+        ("land", 0), ("land", 1), ("land", 2), ("release", 0), ("release", 1), ("release", 2)]
+    assert len(actions) == 12
+
+
+def test_step_sizes_and_switches_come_from_the_config(compose_cfg):
+    prim = compose_cfg("primitives.repose_dx_m=0.02", "primitives.repose_dtheta_rad=0.05",
+                       "primitives.slide_dc_m=0.03", "primitives.flip=false").primitives
+    actions = action_table(prim)
+    assert len(actions) == 12
+    by_name = {a.name: a for a in actions}
+    assert by_name["repose -x"].delta == (-0.02, 0.0, 0.0)
+    assert by_name["repose +theta"].delta == (0.0, 0.0, 0.05)
+    assert by_name["slide finger 1 -"].dc == -0.03
+
+
+@pytest.fixture
+def pole_setup(compose_cfg):
+    cfg = compose_cfg()
+    model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
+    world = World(cfg.sim, cfg.hand, ObjectSpec.from_config(cfg.object))
+    yield cfg, model, world
+    world.close()
+
+
+def observe(world: World) -> Observation:
+    pose, twist = world.object_state()
+    q, qd = world.joint_state()
+    return Observation(q, qd, pose, twist, 0.0)
+
+
+def test_bend_grasp_mask(pole_setup):
+    cfg, model, world = pole_setup
+    contacts = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
+    pose = np.array([0.0, 0.2, 0.0])
+    world.reset(pose, model.grasp_q(contacts, pose, press=0.0005))
+    actions = action_table(cfg.primitives)
+    mask, planned = feasibility(actions, model, contacts, Gains(), cfg.primitives,
+                                observe(world))
+    kinds = np.array([a.kind for a in actions])
+    assert mask[kinds == "repose"].all()  # small reposes of a centred grasp are all reachable
+    assert not mask[kinds == "flip"].any()  # fingers 1 and 2 (or 0 and 1) cannot hold alone
+    assert all((p is not None) == m for p, m in zip(planned, mask, strict=True))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_mask_agrees_with_execution(pole_setup, seed):
+    """A masked action is refused by execution before any step, leaving the world as it was;
+    an allowed one is carried out (here: one allowed repose and one allowed slide)."""
+    cfg, model, world = pole_setup
+    pose, contacts, q = random_grasp(model, np.random.default_rng(seed))
+    world.reset(pose, q)
+    actions = action_table(cfg.primitives)
+    obs = observe(world)
+    mask, _ = feasibility(actions, model, contacts, Gains(), cfg.primitives, obs)
+    for a in actions:
+        if mask[a.index]:
+            continue
+        out = execute(world, make_primitive(a, model, contacts, Gains(), cfg.primitives))
+        assert out.reason == "infeasible" and out.steps == 0 and out.detail, (a.name, out)
+    np.testing.assert_array_equal(world.object_pose(), obs.pose)
+    for kind in ("repose", "slide"):
+        allowed = [a for a in actions if a.kind == kind and mask[a.index]]
+        if allowed:
+            out = execute(world, make_primitive(allowed[0], model, contacts, Gains(),
+                                                cfg.primitives))
+            assert out.steps > 0 and out.reason != "infeasible", (allowed[0].name, out)
+            contacts = model.measured(contacts, world.object_pose(), world.joint_q())

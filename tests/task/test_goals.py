@@ -1,0 +1,88 @@
+"""Goal datasets: deterministic, of the right kind, saved and loaded with clear errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from inhand_exp.config import HandConfig, ObjectConfig
+from inhand_exp.control.hand import HandModel
+from inhand_exp.task.goals import (
+    GoalsError,
+    goal_set,
+    load_goals,
+    reachable,
+    save_goals,
+    to_frame,
+)
+
+
+@pytest.fixture(scope="module")
+def model() -> HandModel:
+    return HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
+
+
+def test_same_seed_same_set_and_pairs_independent_of_count(model):
+    a = to_frame(goal_set(model, "medium", 6, seed=5))
+    b = to_frame(goal_set(model, "medium", 6, seed=5))
+    assert a.equals(b)
+    first = to_frame(goal_set(model, "medium", 3, seed=5))
+    assert first.equals(a.iloc[:3])
+    assert not a.equals(to_frame(goal_set(model, "medium", 6, seed=6)))
+
+
+def test_train_and_test_splits_differ(model):
+    test = to_frame(goal_set(model, "easy", 5, seed=1, split="test"))
+    train = to_frame(goal_set(model, "easy", 5, seed=1, split="train"))
+    assert not np.isin(test["xg_x"].to_numpy(), train["xg_x"].to_numpy()).any()
+
+
+def test_easy_goals_are_reachable_by_reposing_along_the_way(model):
+    for p in goal_set(model, "easy", 8, seed=2):
+        assert all(reachable(model, p.contacts, p.x0 + (p.xg - p.x0) * s)
+                   for s in np.linspace(0, 1, 9))
+        assert reachable(model, p.contacts, p.x0)
+
+
+@pytest.mark.parametrize("group", ["easy", "medium", "hard"])
+def test_goals_are_not_already_solved(model, group):
+    for p in goal_set(model, group, 8, seed=3):
+        d = np.abs(p.xg - p.x0)
+        assert max(d[0], d[1]) >= 0.01 or d[2] >= 0.1
+        assert p.group == group
+
+
+def test_save_load_round_trip_and_no_overwrite(model, tmp_path):
+    pairs = goal_set(model, "hard", 4, seed=4)
+    path = save_goals(pairs, tmp_path / "goals.csv")
+    back = load_goals(path)
+    assert [p.contacts.posture for p in back] == [p.contacts.posture for p in pairs]
+    np.testing.assert_allclose([p.xg for p in back], [p.xg for p in pairs], atol=1e-8)
+    np.testing.assert_allclose([p.contacts.coords for p in back],
+                               [p.contacts.coords for p in pairs], atol=1e-8)
+    before = path.read_bytes()
+    with pytest.raises(FileExistsError, match="never overwritten"):
+        save_goals(pairs, path)
+    assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda df: df.drop(columns=["xg_z"]), "missing column"),
+    (lambda df: df.assign(group="impossible"), "line 2: group must be one of"),
+    (lambda df: df.assign(faces="top/side/bottom"), "line 2: faces must be three of"),
+    (lambda df: df.assign(x0_x="abc"), "line 2: a pose or contact is not a number"),
+    (lambda df: df.assign(c1=float("nan")), "line 2: non-finite"),
+])
+def test_bad_goal_files_name_the_problem(model, tmp_path, edit, message):
+    path = tmp_path / "bad.csv"
+    edit(to_frame(goal_set(model, "easy", 2, seed=0))).to_csv(path, index=False)
+    with pytest.raises(GoalsError, match=message):
+        load_goals(path)
+
+
+def test_missing_and_wrong_kind_of_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not found"):
+        load_goals(tmp_path / "nope.csv")
+    (tmp_path / "goals.json").write_text("{}")
+    with pytest.raises(GoalsError, match="CSV"):
+        load_goals(tmp_path / "goals.json")

@@ -1,0 +1,1 @@
+"""TorchRL environments: the mid-level primitive environment."""

@@ -1,0 +1,159 @@
+"""The mid-level TorchRL environment (paper section III-B): one step is one primitive.
+
+Clocks: the policy acts once per primitive; the primitive's torque law runs every physics step
+(``sim.timestep_s``) for the primitive's duration. Observation (paper IV-A): joint angles and
+velocities (12), the observed object pose ``X_t`` (3, with uniform noise under ``noise=paper``)
+and the goal ``X_g`` (3); ``action_mask`` says which actions the feasibility filter allows.
+``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation.
+Filter modes: ``mask`` (only allowed actions may be taken; an episode with none ends), ``penalty``
+(the paper: a rejected action costs ``task.reward_invalid`` and does nothing) and ``off`` (every
+action is attempted; one its primitive refuses does nothing and costs the same).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from omegaconf import DictConfig
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Binary, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from inhand_exp.config import ObjectConfig, PerturbConfig
+from inhand_exp.control.execute import Observation, execute
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.repose import Gains
+from inhand_exp.sim.world import ObjectSpec, World
+from inhand_exp.task.actions import action_table, feasibility, make_primitive
+from inhand_exp.task.goals import GoalPair, sample_pair
+from inhand_exp.task.rules import Rules, flip_useful, reached, reward
+
+OBS_DIM = 18
+PRESS_M = 0.0005  # initial fingertip press into the surface (m)
+
+
+def _object_config(node) -> ObjectConfig:
+    return ObjectConfig(**{k: node[k] for k in node})
+
+
+class PrimitiveEnv(EnvBase):
+    """Mid-level environment over one simulated world (batch size ``()``).
+
+    ``goals`` fixes the episodes' (X0, Xg) pairs, taken in order (evaluation); without it each
+    reset draws a fresh pair of the ``goals`` group from the training distribution.
+    """
+
+    def __init__(self, cfg: DictConfig, goals: list[GoalPair] | None = None,
+                 seed: int | None = None):
+        super().__init__(device="cpu", batch_size=torch.Size([]))
+        obj = _object_config(cfg.object)
+        p = cfg.perturb
+        perturb = PerturbConfig(p.name, p.mass_scale, p.width_scale, p.length_scale)
+        g = cfg.sim.gravity_mps2
+        self.world = World(cfg.sim, cfg.hand, ObjectSpec.from_config(obj, perturb))
+        self.model = HandModel.from_config(cfg.hand, obj, g)  # what the controllers know
+        true_obj = ObjectConfig(obj.name, obj.length_m * p.length_scale,
+                                obj.width_m * p.width_scale, obj.depth_m,
+                                obj.mass_kg * p.mass_scale, obj.friction)
+        self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
+        self.prim, self.group = cfg.primitives, cfg.goals.name
+        self.gains, self.rules = Gains.from_config(cfg.primitives), Rules.from_config(cfg.task)
+        self.filter = str(cfg.task.filter.value if hasattr(cfg.task.filter, "value")
+                          else cfg.task.filter)
+        self.noise = np.array([cfg.noise.xz_m, cfg.noise.xz_m, cfg.noise.theta_rad])
+        self.actions = action_table(cfg.primitives)
+        self.goals, self.episode = goals, 0
+        n = len(self.actions)
+        self.observation_spec = Composite(
+            observation=Unbounded(shape=(OBS_DIM,), dtype=torch.float32),
+            action_mask=Binary(n=n, dtype=torch.bool),
+            success=Binary(n=1, dtype=torch.bool),
+            dropped=Binary(n=1, dtype=torch.bool),
+            sim_time_s=Unbounded(shape=(1,), dtype=torch.float32))
+        self.action_spec = Categorical(n)
+        self.reward_spec = Unbounded(shape=(1,), dtype=torch.float32)
+        self.full_done_spec = Composite(
+            done=Categorical(2, shape=(1,), dtype=torch.bool),
+            terminated=Categorical(2, shape=(1,), dtype=torch.bool),
+            truncated=Categorical(2, shape=(1,), dtype=torch.bool))
+        self.set_seed(0 if seed is None else seed)
+
+    # --- seeding and observing ----------------------------------------------------------
+
+    def _set_seed(self, seed: int | None) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def _observe(self) -> tuple[Observation, np.ndarray]:
+        """The controllers' and the policy's view: true joints, object pose with noise."""
+        pose, twist = self.world.object_state()
+        q, qd = self.world.joint_state()
+        offset = self.rng.uniform(-self.noise, self.noise) if self.noise.any() else np.zeros(3)
+        return Observation(q, qd, pose + offset, twist, 0.0), offset
+
+    def _output(self, **done) -> TensorDict:
+        obs, self.offset = self._observe()
+        self.mask, self.planned = feasibility(self.actions, self.model, self.contacts,
+                                              self.gains, self.prim, obs)
+        mask = self.mask if self.filter == "mask" else np.ones_like(self.mask)
+        vec = np.concatenate([obs.q, obs.qd, obs.pose, self.goal]).astype(np.float32)
+        stuck = self.filter == "mask" and not mask.any()
+        flags = {k: torch.tensor([v]) for k, v in done.items()}
+        if stuck:  # no action is allowed: the episode cannot go on
+            flags["truncated"] = torch.tensor([True])
+            flags["done"] = torch.tensor([True])
+            mask = np.ones_like(mask)  # keep the distribution defined
+        self.action_spec.update_mask(torch.from_numpy(mask))  # rand_action samples allowed ones
+        return TensorDict({
+            "observation": torch.from_numpy(vec),
+            "action_mask": torch.from_numpy(mask),
+            "success": torch.tensor([self.success]),
+            "dropped": torch.tensor([self.dropped]),
+            "sim_time_s": torch.tensor([self.sim_time], dtype=torch.float32),
+            **flags}, batch_size=())
+
+    # --- episodes -----------------------------------------------------------------------
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDict:
+        if self.goals is not None:
+            pair = self.goals[self.episode % len(self.goals)]
+        else:
+            pair = sample_pair(self.model, self.group, self.rng)
+        self.episode += 1
+        self.pair, self.goal, self.contacts = pair, pair.xg.copy(), pair.contacts
+        self.world.reset(pair.x0, self.true_model.grasp_q(pair.contacts, pair.x0, PRESS_M))
+        self.n_actions, self.n_invalid, self.sim_time = 0, 0, 0.0
+        self.success, self.dropped = False, False
+        false = False
+        return self._output(done=false, terminated=false, truncated=false)
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDict:
+        a = int(tensordict["action"])
+        action = self.actions[a]
+        allowed = bool(self.mask[a])
+        useful, valid = False, True
+        if not allowed and self.filter != "off":
+            valid = False  # rejected by the filter: no motion
+        else:
+            prim = self.planned[a] or make_primitive(action, self.model, self.contacts,
+                                                     self.gains, self.prim)
+            out = execute(self.world, prim, self.offset)
+            self.sim_time += out.sim_time_s
+            valid = out.reason != "infeasible"
+            self.dropped = out.reason in ("lost_contact", "unstable")
+            if out.ok and action.kind in ("flip", "release", "land"):
+                self.contacts = prim.result
+            pose, q = self.world.object_pose(), self.world.joint_q()
+            self.contacts = self.model.measured(self.contacts, pose, q)
+            if out.ok and action.kind == "flip":
+                useful = flip_useful(self.model, self.contacts, action.finger, pose, self.goal)
+        self.n_invalid += not valid
+        self.n_actions += 1
+        self.success = not self.dropped and reached(self.world.object_pose(), self.goal,
+                                                    self.rules)
+        terminated = self.success or self.dropped
+        truncated = not terminated and self.n_actions >= self.rules.max_actions
+        r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful)
+        td = self._output(done=terminated or truncated, terminated=terminated,
+                          truncated=truncated)
+        td["reward"] = torch.tensor([r], dtype=torch.float32)
+        return td

@@ -3,8 +3,8 @@
 ``lam`` stacks ``(f_n, f_t)`` per contact (N), as in ``grasp.grasp_matrix``. Two solvers:
 
 - ``solve_lp``: the exact linear program ``G lam = w``, ``f_n >= f_min``, ``|f_t| <= mu f_n``,
-  ``f_n <= f_max``, least total squeeze; ``None`` when infeasible. About a millisecond: used for
-  feasibility checks and as the reference in tests.
+  ``f_n <= f_max``, least total squeeze; ``None`` when infeasible (HiGHS, about 0.2 ms): used
+  for feasibility checks and as the reference in tests.
 - ``Squeeze``: for one contact configuration (``G`` constant in the object frame), the internal
   force ``lam0`` in the null space of ``G`` that lies deepest inside all cones, found once by an
   LP. Each control step then takes ``lam = pinv(G) w + alpha lam0`` with the least ``alpha`` that
@@ -18,10 +18,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linprog
+
+from inhand_exp.control.lp import SmallLP, linprog
 
 
 def _cone_rows(k: int, mu: float) -> np.ndarray:
@@ -37,11 +38,8 @@ def solve_lp(G: np.ndarray, w: np.ndarray, mu: float, f_min: float,
              f_max: float = np.inf) -> np.ndarray | None:
     """Contact forces with ``G lam = w`` inside the cones and bounds, least total normal force."""
     k = G.shape[1] // 2
-    cost = np.tile([1.0, 0.0], k)
-    bounds = [(f_min, None if np.isinf(f_max) else f_max), (None, None)] * k
-    res = linprog(cost, A_ub=_cone_rows(k, mu), b_ub=np.zeros(2 * k), A_eq=G, b_eq=w,
-                  bounds=bounds, method="highs")
-    return res.x if res.status == 0 else None
+    return linprog(np.tile([1.0, 0.0], k), G, w, _cone_rows(k, mu), np.zeros(2 * k),
+                   np.tile([f_min, -np.inf], k), np.tile([f_max, np.inf], k))
 
 
 @dataclass(frozen=True)
@@ -67,6 +65,7 @@ class Squeeze:
     f_max: float
     cost: np.ndarray | None = None  # per free variable: always solve the LP with this cost
     fast: tuple | None = None  # the closed form's constants as plain floats (see _closed_form)
+    lp: SmallLP | None = field(default=None, compare=False)  # the per-step LP, once needed
 
     @classmethod
     def build(cls, G: np.ndarray, mu: float, f_min: float, f_max: float = np.inf,
@@ -105,10 +104,11 @@ class Squeeze:
         A_eq[3, fn] = 1.0
         cost = np.zeros(m + 1)
         cost[m] = -1.0
-        res = linprog(cost, A_ub=np.array(rows), b_ub=np.zeros(len(rows)), A_eq=A_eq,
-                      b_eq=np.array([0.0, 0.0, 0.0, 1.0]),
-                      bounds=[(None, None)] * m + [(None, 1.0)], method="highs")
-        lam0, margin = (res.x[:m], float(res.x[m])) if res.status == 0 else (np.zeros(m), 0.0)
+        upper = np.full(m + 1, np.inf)
+        upper[m] = 1.0
+        x = linprog(cost, A_eq, np.array([0.0, 0.0, 0.0, 1.0]), np.array(rows),
+                    np.zeros(len(rows)), np.full(m + 1, -np.inf), upper)
+        lam0, margin = (x[:m], float(x[m])) if x is not None else (np.zeros(m), 0.0)
         cost = None
         if light:
             cost = np.zeros(m)
@@ -145,25 +145,25 @@ class Squeeze:
         return lam
 
     def _lp(self, w: np.ndarray) -> np.ndarray | None:
-        m = len(self.cols)
-        rows = []
-        for a, b in self.fric:
-            for sign in (1.0, -1.0):
-                r = np.zeros(m)
-                r[a], r[b] = -self.mu, sign
-                rows.append(r)
-        if self.cost is None:
-            cost = np.zeros(m)
-            cost[self.fn] = 1.0
-        else:
-            cost = self.cost
-        bounds = [(None, None)] * m
-        for a in self.fn:
-            bounds[a] = (self.f_min, None if np.isinf(self.f_max) else self.f_max)
-        res = linprog(cost, A_ub=np.array(rows) if rows else None,
-                      b_ub=np.zeros(len(rows)) if rows else None, A_eq=self.G, b_eq=w,
-                      bounds=bounds, method="highs")
-        return res.x if res.status == 0 else None
+        if self.lp is None:  # built at first use, then warm-started step after step
+            m = len(self.cols)
+            rows = []
+            for a, b in self.fric:
+                for sign in (1.0, -1.0):
+                    r = np.zeros(m)
+                    r[a], r[b] = -self.mu, sign
+                    rows.append(r)
+            if self.cost is None:
+                cost = np.zeros(m)
+                cost[self.fn] = 1.0
+            else:
+                cost = self.cost
+            lower, upper = np.full(m, -np.inf), np.full(m, np.inf)
+            lower[self.fn], upper[self.fn] = self.f_min, self.f_max
+            object.__setattr__(self, "lp", SmallLP(cost, self.G, np.array(rows) if rows else None,
+                                                    np.zeros(len(rows)) if rows else None,
+                                                    lower, upper))
+        return self.lp.solve(w)
 
     def _closed_form(self, w: np.ndarray) -> np.ndarray | None:
         """``pinv(G) w + alpha lam0`` with the least feasible ``alpha`` (plain floats)."""

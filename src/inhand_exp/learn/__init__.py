@@ -1,0 +1,1 @@
+"""Learners: PPO (mid level); DDPG and search baselines and evaluation come later."""

@@ -1,0 +1,154 @@
+"""PPO for the mid-level policy (paper section IV-A): TorchRL collector, GAE and ClipPPOLoss.
+
+The policy is a masked categorical over the discrete actions (infeasible actions get no
+probability), the critic a value network; both are 3 x 256 MLPs as in the paper. Training reports
+through ``progress(iteration, metrics)`` and never imports the logger. A checkpoint holds
+everything needed to resume (networks, optimiser, counters, RNG states) as tensors and plain
+numbers, so it loads with ``torch.load(weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from tensordict.nn import TensorDictModule
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.envs import EnvBase
+from torchrl.modules import MLP, MaskedCategorical, ProbabilisticActor, ValueOperator
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+
+Progress = Callable[[int, dict[str, float]], None]
+
+
+@dataclass
+class PPOParams:
+    """The learner's hyper-parameters (see ``config.PPOConfig`` for their meaning)."""
+
+    lr: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coef: float = 0.01
+    critic_coef: float = 0.5
+    hidden: tuple[int, ...] = (256, 256, 256)
+    frames_per_batch: int = 1024
+    epochs: int = 4
+    minibatch_size: int = 256
+    max_grad_norm: float = 1.0
+
+    @classmethod
+    def from_config(cls, learner) -> PPOParams:
+        return cls(learner.lr, learner.gamma, learner.gae_lambda, learner.clip_epsilon,
+                   learner.entropy_coef, learner.critic_coef, tuple(learner.hidden),
+                   learner.frames_per_batch, learner.epochs, learner.minibatch_size,
+                   learner.max_grad_norm)
+
+
+def make_networks(obs_dim: int, n_actions: int, hidden: tuple[int, ...]
+                  ) -> tuple[ProbabilisticActor, ValueOperator]:
+    """Masked categorical policy and value critic over ``observation``."""
+    logits = TensorDictModule(MLP(in_features=obs_dim, out_features=n_actions,
+                                  num_cells=list(hidden), activation_class=nn.Tanh),
+                              in_keys=["observation"], out_keys=["logits"])
+    actor = ProbabilisticActor(logits, in_keys={"logits": "logits", "mask": "action_mask"},
+                               distribution_class=MaskedCategorical, return_log_prob=True)
+    critic = ValueOperator(MLP(in_features=obs_dim, out_features=1, num_cells=list(hidden),
+                               activation_class=nn.Tanh), in_keys=["observation"])
+    return actor, critic
+
+
+class PPO:
+    """Networks, loss and optimiser; ``train`` runs the collector loop, ``state_dict`` resumes."""
+
+    def __init__(self, obs_dim: int, n_actions: int, params: PPOParams):
+        self.params, self.obs_dim, self.n_actions = params, obs_dim, n_actions
+        self.actor, self.critic = make_networks(obs_dim, n_actions, params.hidden)
+        self.advantage = GAE(gamma=params.gamma, lmbda=params.gae_lambda,
+                             value_network=self.critic)
+        self.loss = ClipPPOLoss(self.actor, self.critic, clip_epsilon=params.clip_epsilon,
+                                entropy_coeff=params.entropy_coef,
+                                critic_coeff=params.critic_coef, normalize_advantage=True)
+        self.optim = torch.optim.Adam(self.loss.parameters(), lr=params.lr)
+        self.iteration, self.frames = 0, 0
+
+    def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
+              checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:
+        """Collect ``total_frames`` more actions from ``env`` and learn from them."""
+        p = self.params
+        collector = Collector(env, self.actor, frames_per_batch=p.frames_per_batch,
+                              total_frames=total_frames,
+                              auto_register_policy_transforms=False)  # not recurrent
+        try:
+            for batch in collector:
+                metrics = self._update(batch)
+                collector.update_policy_weights_()
+                self.iteration += 1
+                self.frames += batch.numel()
+                if progress is not None:
+                    progress(self.iteration, {"frames": self.frames, **metrics})
+                if checkpoint is not None and self.iteration % checkpoint_every == 0:
+                    self.save(checkpoint)
+        finally:
+            collector.shutdown()
+        if checkpoint is not None:
+            self.save(checkpoint)
+
+    def _update(self, batch) -> dict[str, float]:
+        p = self.params
+        with torch.no_grad():
+            self.advantage(batch)
+        flat = batch.reshape(-1)
+        losses = []
+        for _ in range(p.epochs):
+            for idx in torch.randperm(len(flat)).split(p.minibatch_size):
+                out = self.loss(flat[idx])
+                total = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
+                self.optim.zero_grad()
+                total.backward()
+                nn.utils.clip_grad_norm_(self.loss.parameters(), p.max_grad_norm)
+                self.optim.step()
+                losses.append([float(out[k].detach()) for k in ("loss_objective", "loss_critic",
+                                                       "loss_entropy")])
+        done = batch["next", "done"].squeeze(-1)
+        ends = max(int(done.sum()), 1)
+        mean = torch.tensor(losses).mean(0).tolist()
+        return {"loss_objective": mean[0], "loss_critic": mean[1], "loss_entropy": mean[2],
+                "mean_reward": float(batch["next", "reward"].mean()),
+                "episodes": float(done.sum()),
+                "success_rate": float(batch["next", "success"].squeeze(-1)[done].sum()) / ends,
+                "drop_rate": float(batch["next", "dropped"].squeeze(-1)[done].sum()) / ends}
+
+    # --- checkpoints --------------------------------------------------------------------
+
+    def state_dict(self) -> dict:
+        return {"actor": self.actor.state_dict(), "critic": self.critic.state_dict(),
+                "optim": self.optim.state_dict(), "iteration": self.iteration,
+                "frames": self.frames, "obs_dim": self.obs_dim, "n_actions": self.n_actions,
+                "torch_rng": torch.get_rng_state()}
+
+    def save(self, path: Path) -> None:
+        """Write atomically: a killed save never leaves a half-written checkpoint."""
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        torch.save(self.state_dict(), tmp)
+        tmp.replace(path)
+
+    def load(self, path: Path) -> None:
+        """Resume from ``path``; a checkpoint for other observation or action sizes is refused."""
+        if not path.is_file():
+            raise FileNotFoundError(f"checkpoint {path} not found")
+        state = torch.load(path, weights_only=True)
+        if (state["obs_dim"], state["n_actions"]) != (self.obs_dim, self.n_actions):
+            raise ValueError(
+                f"checkpoint {path} is for {state['obs_dim']} observations and "
+                f"{state['n_actions']} actions; this configuration has {self.obs_dim} and "
+                f"{self.n_actions}")
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.optim.load_state_dict(state["optim"])
+        self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
+        torch.set_rng_state(state["torch_rng"])

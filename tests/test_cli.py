@@ -12,12 +12,15 @@ import pytest
 from inhand_exp.record import read_log
 
 APP = [sys.executable, "-c", "from inhand_exp.cli import main; main()"]
+# a tiny training and evaluation budget: the CLI runs end to end in seconds
+FAST = ["train.frames=8", "learner.frames_per_batch=8", "learner.minibatch_size=4",
+        "learner.epochs=1", "eval.episodes=1", "task.max_actions=2"]
 
 
-def inhand_exp(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+def inhand_exp(*args: str, cwd: Path, fast: bool = True) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
-    return subprocess.run([*APP, *args], cwd=cwd, env=env, capture_output=True, text=True,
-                          timeout=180)
+    return subprocess.run([*APP, *args, *(FAST if fast else [])], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300)
 
 
 def run_config(path: Path) -> dict:
@@ -39,13 +42,21 @@ def test_default_run_goes_under_logs_runs_date_time(tmp_path):
     assert msg["seed"] == 7 and msg["config"]["seed"] == 7
     assert msg["config"]["object"]["name"] == "pole"
     assert msg["versions"]["torch"].startswith("2.13")
-    assert msg["overrides"] == ["seed=7"]
+    assert msg["overrides"] == ["seed=7", *FAST]
+    log = read_log(log_path)
+    assert [m["iteration"] for m in log.topic("/train/iteration")] == [1]
+    (episode,) = log.topic("/eval/episode")
+    assert {"group", "success", "dropped", "timeout", "sim_time_s", "n_actions", "x0", "xg",
+            "final_pose"} <= set(episode)
+    assert (log_path.parent / "policy.pt").is_file() and (log_path.parent / "goals.csv").is_file()
+    assert "ours" in res.stdout and "paper" in res.stdout
 
 
 def test_config_error_exits_before_writing_a_log(tmp_path):
     res = inhand_exp("object.mass_kg=-1", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
     assert res.returncode == 2
     assert "object.mass_kg must be > 0, got -1.0" in res.stderr
+    assert "Traceback" not in res.stderr
     assert not (tmp_path / "run" / "run.mcap").exists()
 
 
@@ -82,3 +93,28 @@ def test_multirun_default_layout(tmp_path):
     logs = sorted(tmp_path.glob("logs/multirun/*/*/*/run.mcap"))
     assert [p.parent.name for p in logs] == ["0", "1"]
     assert [run_config(p)["config"]["goals"]["name"] for p in logs] == ["easy", "hard"]
+
+
+def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
+    first = inhand_exp("mode=train", f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    policy = tmp_path / "train" / "policy.pt"
+    res = inhand_exp("mode=eval", f"checkpoint={policy}", f"hydra.run.dir={tmp_path / 'ev'}",
+                     cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert len(read_log(tmp_path / "ev" / "run.mcap").topic("/eval/episode")) == 1
+    for k, (args, message) in enumerate([
+        (["mode=eval"], "mode=eval needs checkpoint=PATH"),
+        (["mode=eval", f"checkpoint={tmp_path / 'missing.pt'}"], "not found"),
+        (["mode=eval", f"checkpoint={policy}", "object=cube"], "this configuration has"),
+        (["learner=ddpg"], "learner=ddpg is not built yet"),
+        (["mode=eval", f"checkpoint={policy}", f"eval.goals_file={tmp_path / 'no.csv'}"],
+         "not found"),
+    ]):
+        run_dir = tmp_path / f"bad{k}"
+        bad = inhand_exp(*args, f"hydra.run.dir={run_dir}", cwd=tmp_path,
+                         fast=args != ["learner=ddpg"])  # the fast budget is PPO's
+        assert bad.returncode == 2 and message in bad.stderr, (args, bad.stderr)
+        assert "Traceback" not in bad.stderr
+        if "configuration has" not in message:  # refused before anything was written
+            assert not (run_dir / "run.mcap").exists()

@@ -41,7 +41,7 @@ def test_defaults_are_the_paper_setting(compose_cfg):
     assert (cfg.object.name, cfg.primitives.name, cfg.learner.name) == ("pole", "pole", "ppo")
     assert (cfg.perturb.name, cfg.noise.name) == ("none", "none")
     assert cfg.task.filter.value == "mask" and cfg.train.num_envs == 16
-    assert cfg.eval.episodes == 500
+    assert cfg.eval.episodes == 50 and cfg.train.frames == 1024
 
 
 def test_object_choice_selects_matching_primitives(compose_cfg):
@@ -121,6 +121,7 @@ def test_impossible_values_name_field_and_value(compose_cfg, override, message):
 @pytest.mark.parametrize(("overrides", "message"), [
     (["object=cube", "primitives=pole"], "primitives=pole does not fit object=cube"),
     (["primitives.repose_duration_s=0.501"], "not a whole number of physics steps"),
+    (["mode=eval"], "mode=eval needs checkpoint=PATH"),
     (["hand.joint_lower_rad=[1,0]", "hand.joint_upper_rad=[0,1]"],
      "hand.joint_lower_rad[0] < hand.joint_upper_rad[0]"),
 ])

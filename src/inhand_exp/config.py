@@ -194,7 +194,7 @@ class TaskConfig:
 
 @dataclass
 class TrainConfig:
-    frames: int = spec(20_000, "Training budget in mid-level actions.", gt=0)
+    frames: int = spec(1024, "Training budget in mid-level actions (a short default).", gt=0)
     num_envs: int = spec(16, "Environments collecting in parallel.", gt=0)
     workers: int = spec(2, "Worker processes for the environments (<= cores).", gt=0)
     backend: EnvBackend = spec(EnvBackend.parallel, "Batched env: parallel or serial.")
@@ -203,7 +203,7 @@ class TrainConfig:
 
 @dataclass
 class EvalConfig:
-    episodes: int = spec(500, "Episodes per goal group.", gt=0)
+    episodes: int = spec(50, "Episodes per goal group (the paper: 500).", gt=0)
     goals_file: str | None = spec(None, "CSV/Parquet goal set to evaluate on instead.")
 
 
@@ -302,6 +302,8 @@ def _check_value(key: str, value: Any, rules: Any) -> None:
 
 def _check_consistency(cfg: DictConfig) -> None:
     """Cross-field rules: matching object and primitives, whole step ratios, joint limits."""
+    if cfg.mode == Mode.eval and not cfg.checkpoint:
+        raise ConfigError("mode=eval needs checkpoint=PATH (a policy.pt of an earlier run)")
     if cfg.object.name != cfg.primitives.name:
         raise ConfigError(f"primitives={cfg.primitives.name} does not fit object="
                           f"{cfg.object.name}; choose primitives={cfg.object.name}")

@@ -25,6 +25,10 @@ from torchrl.objectives.value import GAE
 Progress = Callable[[int, dict[str, float]], None]
 
 
+class CheckpointError(ValueError):
+    """A checkpoint that does not fit this configuration."""
+
+
 @dataclass
 class PPOParams:
     """The learner's hyper-parameters (see ``config.PPOConfig`` for their meaning)."""
@@ -143,7 +147,7 @@ class PPO:
             raise FileNotFoundError(f"checkpoint {path} not found")
         state = torch.load(path, weights_only=True)
         if (state["obs_dim"], state["n_actions"]) != (self.obs_dim, self.n_actions):
-            raise ValueError(
+            raise CheckpointError(
                 f"checkpoint {path} is for {state['obs_dim']} observations and "
                 f"{state['n_actions']} actions; this configuration has {self.obs_dim} and "
                 f"{self.n_actions}")

@@ -16,7 +16,8 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from inhand_exp.control.hand import HandModel
-from inhand_exp.envs.primitive_env import OBS_DIM, PrimitiveEnv
+from inhand_exp.envs.primitive_env import PrimitiveEnv
+from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.learn.evaluate import evaluate
 from inhand_exp.learn.ppo import PPO, PPOParams
 from inhand_exp.record import RunLog

@@ -67,7 +67,8 @@ def test_checkpoint_for_another_observation_size_is_refused(tmp_path):
 
 
 def test_ppo_runs_on_the_primitive_environment(compose_cfg):
-    from inhand_exp.envs.primitive_env import OBS_DIM, PrimitiveEnv
+    from inhand_exp.envs.primitive_env import PrimitiveEnv
+    from inhand_exp.envs.specs import OBS_DIM
 
     env = PrimitiveEnv(compose_cfg("goals=easy", "task.max_actions=4"), seed=0)
     ppo = PPO(OBS_DIM, len(env.actions), PPOParams(frames_per_batch=8, minibatch_size=4,

@@ -64,13 +64,14 @@ class Outcome:
 
 def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | None = None,
             check_every: int = 4, drop_grace_s: float = 0.05,
-            state_check: StateCheck = state_problem) -> Outcome:
+            state_check: StateCheck = state_problem, started: bool = False) -> Outcome:
     """Drive ``primitive`` for its duration; stop early on infeasibility, a drop or instability.
 
     ``pose_offset`` is the observation error on the object pose (noise drawn by the caller, held
     for the primitive). Every ``check_every`` steps the simulated state is checked with
     ``state_check`` and the grasp from PyBullet's contacts; a loss lasting ``drop_grace_s`` is a
-    drop.
+    drop. ``started``: the primitive was already planned (``start`` accepted) on the current
+    state, as the feasibility filter does, so it is not planned again.
     """
     offset = np.zeros(3) if pose_offset is None else pose_offset
     n = round(primitive.duration_s / world.dt)
@@ -82,7 +83,7 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
         return pose, twist, q, qd
 
     pose, twist, q, qd = read()
-    why = primitive.start(Observation(q, qd, pose + offset, twist, 0.0))
+    why = None if started else primitive.start(Observation(q, qd, pose + offset, twist, 0.0))
     if why is not None:
         return Outcome(False, "infeasible", why, 0.0, 0)
     for k in range(n):

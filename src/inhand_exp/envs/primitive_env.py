@@ -16,19 +16,18 @@ import numpy as np
 import torch
 from omegaconf import DictConfig
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from inhand_exp.config import ObjectConfig, PerturbConfig
 from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import Gains
+from inhand_exp.envs.specs import declare_mid_level_specs
 from inhand_exp.sim.world import ObjectSpec, World
 from inhand_exp.task.actions import action_table, feasibility, make_primitive
 from inhand_exp.task.goals import GoalPair, sample_pair
 from inhand_exp.task.rules import Rules, flip_useful, reached, reward
 
-OBS_DIM = 18
 PRESS_M = 0.0005  # initial fingertip press into the surface (m)
 
 
@@ -64,18 +63,7 @@ class PrimitiveEnv(EnvBase):
         self.actions = action_table(cfg.primitives)
         self.goals, self.episode = goals, 0
         n = len(self.actions)
-        self.observation_spec = Composite(
-            observation=Unbounded(shape=(OBS_DIM,), dtype=torch.float32),
-            action_mask=Binary(n=n, dtype=torch.bool),
-            success=Binary(n=1, dtype=torch.bool),
-            dropped=Binary(n=1, dtype=torch.bool),
-            sim_time_s=Unbounded(shape=(1,), dtype=torch.float32))
-        self.action_spec = Categorical(n)
-        self.reward_spec = Unbounded(shape=(1,), dtype=torch.float32)
-        self.full_done_spec = Composite(
-            done=Categorical(2, shape=(1,), dtype=torch.bool),
-            terminated=Categorical(2, shape=(1,), dtype=torch.bool),
-            truncated=Categorical(2, shape=(1,), dtype=torch.bool))
+        declare_mid_level_specs(self, n)
         self.set_seed(0 if seed is None else seed)
 
     # --- seeding and observing ----------------------------------------------------------
@@ -134,9 +122,10 @@ class PrimitiveEnv(EnvBase):
         if not allowed and self.filter != "off":
             valid = False  # rejected by the filter: no motion
         else:
-            prim = self.planned[a] or make_primitive(action, self.model, self.contacts,
-                                                     self.gains, self.prim)
-            out = execute(self.world, prim, self.offset)
+            prim = self.planned[a]  # planned by the filter on this very observation
+            if prim is None:
+                prim = make_primitive(action, self.model, self.contacts, self.gains, self.prim)
+            out = execute(self.world, prim, self.offset, started=self.planned[a] is not None)
             self.sim_time += out.sim_time_s
             valid = out.reason != "infeasible"
             self.dropped = out.reason in ("lost_contact", "unstable")

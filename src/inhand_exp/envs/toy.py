@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-OBS_DIM = 18
+from inhand_exp.envs.specs import OBS_DIM, declare_mid_level_specs
 
 
 class ToyLineEnv(EnvBase):
@@ -22,17 +21,7 @@ class ToyLineEnv(EnvBase):
                  seed: int = 0):
         super().__init__(device="cpu", batch_size=torch.Size([]))
         self.n, self.size, self.max_steps = n_actions, size, max_steps
-        self.observation_spec = Composite(
-            observation=Unbounded(shape=(OBS_DIM,), dtype=torch.float32),
-            action_mask=Binary(n=n_actions, dtype=torch.bool),
-            success=Binary(n=1, dtype=torch.bool), dropped=Binary(n=1, dtype=torch.bool),
-            sim_time_s=Unbounded(shape=(1,), dtype=torch.float32))
-        self.action_spec = Categorical(n_actions)
-        self.reward_spec = Unbounded(shape=(1,), dtype=torch.float32)
-        self.full_done_spec = Composite(
-            done=Categorical(2, shape=(1,), dtype=torch.bool),
-            terminated=Categorical(2, shape=(1,), dtype=torch.bool),
-            truncated=Categorical(2, shape=(1,), dtype=torch.bool))
+        declare_mid_level_specs(self, n_actions)
         self.set_seed(seed)
 
     def _set_seed(self, seed: int | None) -> None:

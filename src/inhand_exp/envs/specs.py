@@ -1,0 +1,26 @@
+"""The specs every mid-level environment declares (the primitive env and the toy alike)."""
+
+from __future__ import annotations
+
+import torch
+from torchrl.data import Binary, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+OBS_DIM = 18  # q (6), qd (6), X_t (3), X_g (3)
+
+
+def declare_mid_level_specs(env: EnvBase, n_actions: int) -> None:
+    """Observation (``observation``, ``action_mask``, ``success``, ``dropped``, ``sim_time_s``),
+    a categorical action over ``n_actions``, a scalar reward and done/terminated/truncated."""
+    env.observation_spec = Composite(
+        observation=Unbounded(shape=(OBS_DIM,), dtype=torch.float32),
+        action_mask=Binary(n=n_actions, dtype=torch.bool),
+        success=Binary(n=1, dtype=torch.bool),
+        dropped=Binary(n=1, dtype=torch.bool),
+        sim_time_s=Unbounded(shape=(1,), dtype=torch.float32))
+    env.action_spec = Categorical(n_actions)
+    env.reward_spec = Unbounded(shape=(1,), dtype=torch.float32)
+    env.full_done_spec = Composite(
+        done=Categorical(2, shape=(1,), dtype=torch.bool),
+        terminated=Categorical(2, shape=(1,), dtype=torch.bool),
+        truncated=Categorical(2, shape=(1,), dtype=torch.bool))

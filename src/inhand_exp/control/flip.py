@@ -13,18 +13,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from inhand_exp.control.forces import Squeeze
 from inhand_exp.control.grasp import (
     Contacts,
     Face,
-    contact_frames,
     face_axes,
-    grasp_matrix,
     rotation,
 )
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.handover import PathTracker, blended_forces, hover, route_round
-from inhand_exp.control.repose import Gains, GraspPlan, follow_qdd, object_wrench, push_torque
+from inhand_exp.control.repose import (
+    Gains,
+    GraspPlan,
+    follow_qdd,
+    object_wrench,
+    push_torque,
+    strict_hold,
+)
 
 OPPOSITE = {Face.TOP: Face.BOTTOM, Face.BOTTOM: Face.TOP,
             Face.LEFT: Face.RIGHT, Face.RIGHT: Face.LEFT}
@@ -58,14 +62,6 @@ def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: Ga
                                            and full.squeeze.solve(w_O) is None):
         return f"fingers {others} cannot hold the object alone"
     return full, pair
-
-
-def strict_hold(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
-    """True when ``contacts`` (as commanded) admit a squeeze strictly inside the cones."""
-    act = [i for i in range(3) if contacts.active[i]]
-    pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
-    G = grasp_matrix(pts[act], nrm[act])
-    return Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min, gains.f_max).usable
 
 
 def handover_torques(model: HandModel, pair: GraspPlan, finger: int, mix, tracker: PathTracker,

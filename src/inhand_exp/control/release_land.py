@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from inhand_exp.control.flip import handover_torques, landed, pair_holds, phase_times, strict_hold
+from inhand_exp.control.flip import handover_torques, landed, pair_holds, phase_times
 from inhand_exp.control.grasp import Contacts, Face, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.handover import PathTracker, hover, route_round
-from inhand_exp.control.repose import Gains, GraspPlan
+from inhand_exp.control.repose import Gains, GraspPlan, strict_hold
 
 RELEASE_PHASES = {"unload": 0.35, "lift": 0.35}  # the rest holds still
 LAND_PHASES = {"travel": 0.5, "touch": 0.15, "load": 0.15}

@@ -17,7 +17,7 @@ import numpy as np
 
 from inhand_exp.control.finger import FingerTerms
 from inhand_exp.control.forces import Squeeze
-from inhand_exp.control.grasp import contact_frames, grasp_matrix, rotation
+from inhand_exp.control.grasp import Contacts, contact_frames, grasp_matrix, rotation
 from inhand_exp.control.hand import HandModel
 
 
@@ -79,6 +79,15 @@ class GraspPlan:
         sq = Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min, gains.f_max,
                            coupled, light=tuple(coupled))
         return cls(fingers, levers_O, normals_O, tips_O, sq)
+
+
+def strict_hold(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
+    """True when ``contacts`` (as commanded, active fingers only) admit a squeeze strictly inside
+    the friction cones: the grasp holds whatever the small wrenches a controller asks for."""
+    act = [i for i in range(3) if contacts.active[i]]
+    pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
+    G = grasp_matrix(pts[act], nrm[act])
+    return Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min, gains.f_max).usable
 
 
 def min_jerk(start: np.ndarray, goal: np.ndarray, duration: float, t: float

@@ -4,21 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from inhand_exp.control.forces import Squeeze
-from inhand_exp.control.grasp import Contacts, Face, Posture, contact_frames, grasp_matrix
+from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import GeometryError, HandModel
+from inhand_exp.control.repose import Gains, strict_hold
 
 # Pose ranges of sampled grasps (m, m, rad): centred over the hand, within easy reach.
 POSE_LOW = np.array([-0.06, 0.16, -0.4])
 POSE_HIGH = np.array([0.06, 0.24, 0.4])
-
-
-def holds_strictly(model: HandModel, contacts: Contacts, mu_margin: float = 0.8,
-                   f_min: float = 0.5) -> bool:
-    """True when the contacts admit a squeeze strictly inside the (shrunk) friction cones."""
-    pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
-    act = [i for i in range(3) if contacts.active[i]]
-    return Squeeze.build(grasp_matrix(pts[act], nrm[act]), model.mu * mu_margin, f_min).usable
 
 
 def lone_between(rng: np.random.Generator, half: float, gap: float = 0.06
@@ -67,7 +59,7 @@ def random_grasp(model: HandModel, rng: np.random.Generator, max_tries: int = 20
         posture, coords = (lone_between(rng, half_x) if elongated(model)
                            else any_faces(rng, half_x + r, half_z))
         contacts = Contacts(posture, coords)
-        if not holds_strictly(model, contacts):
+        if not strict_hold(model, contacts, Gains()):
             continue
         try:
             q = model.grasp_q(contacts, pose, press=press)

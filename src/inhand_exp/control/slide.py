@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inhand_exp.control.forces import Squeeze
-from inhand_exp.control.grasp import Contacts, contact_frames, face_axes, grasp_matrix, rotation
+from inhand_exp.control.grasp import Contacts, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
     Gains,
@@ -25,15 +24,8 @@ from inhand_exp.control.repose import (
     min_jerk,
     object_wrench,
     push_torque,
+    strict_hold,
 )
-
-
-def holds(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
-    """True when ``contacts`` (as commanded) admit a squeeze inside the friction cones."""
-    pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
-    act = [i for i in range(3) if contacts.active[i]]
-    G = grasp_matrix(pts[act], nrm[act])
-    return Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min).usable
 
 
 class Slide:
@@ -75,7 +67,7 @@ class Slide:
         limit = model.shape.half_extent(face) - model.tip_radius
         if abs(self.c1) > limit:
             return f"finger {i} would slide past the end of its face ({self.c1:+.3f} m)"
-        if not holds(model, c.moved(i, coord=self.c1), self.gains):
+        if not strict_hold(model, c.moved(i, coord=self.c1), self.gains):
             return f"the grasp after the slide of finger {i} cannot hold the object"
         self.origin = obs.pose.copy()
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1

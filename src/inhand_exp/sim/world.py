@@ -242,11 +242,6 @@ class World:
         self.step_wall_s += time.perf_counter() - t
         self._steps += 1
 
-    def step_raw(self, n: int) -> None:
-        """``n`` bare ``stepSimulation`` calls with no torque update (benchmark reference)."""
-        for _ in range(n):
-            pb.stepSimulation(physicsClientId=self._cid)
-
     def close(self) -> None:
         if self._cid is not None and pb.isConnected(self._cid):
             pb.disconnect(self._cid)

@@ -23,7 +23,8 @@ import pandas as pd
 
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.sample import POSE_HIGH, POSE_LOW, holds_strictly, random_grasp
+from inhand_exp.control.repose import Gains, strict_hold
+from inhand_exp.control.sample import POSE_HIGH, POSE_LOW, random_grasp
 
 GROUPS = ("easy", "medium", "hard")
 SPLITS = ("train", "test")
@@ -78,7 +79,7 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
             half = model.shape.length_m / 2 - 3 * model.tip_radius
             coords = tuple(float(c) for c in rng.uniform(-half, half, 3))
             cg = Contacts(c0.posture, coords)
-            ok = holds_strictly(model, cg) and reachable(model, cg, xg)
+            ok = strict_hold(model, cg, Gains()) and reachable(model, cg, xg)
         else:
             xg, _, _ = random_grasp(model, rng)
             ok = True

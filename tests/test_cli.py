@@ -14,6 +14,7 @@ from inhand_exp.record import read_log
 APP = [sys.executable, "-c", "from inhand_exp.cli import main; main()"]
 # a tiny training and evaluation budget: the CLI runs end to end in seconds
 FAST = ["train.frames=8", "learner.frames_per_batch=8", "learner.minibatch_size=4",
+        "train.num_envs=2", "train.backend=serial",
         "learner.epochs=1", "eval.episodes=1", "task.max_actions=2"]
 
 
@@ -118,3 +119,33 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
         assert "Traceback" not in bad.stderr
         if "configuration has" not in message:  # refused before anything was written
             assert not (run_dir / "run.mcap").exists()
+
+
+def test_resume_continues_an_interrupted_training_in_its_run_directory(tmp_path):
+    run_dir = tmp_path / "run"
+    # as if killed after 2 iterations of 8 frames: resume asks for 3
+    assert FAST[0] == "train.frames=8"
+    first = inhand_exp("mode=train", f"hydra.run.dir={run_dir}", *FAST[1:], "train.frames=16",
+                       cwd=tmp_path, fast=False)
+    assert first.returncode == 0, first.stderr
+    before = (run_dir / "run.mcap").read_bytes()
+    res = inhand_exp(f"resume={run_dir}", "train.frames=24", cwd=tmp_path, fast=False)
+    assert res.returncode == 0, res.stderr
+    assert "resuming from" in res.stdout and "iteration 2, 16 frames" in res.stdout
+    assert (run_dir / "run.mcap").read_bytes() == before  # nothing already written is lost
+    log = read_log(run_dir / "run-2.mcap")
+    assert [(m["iteration"], m["frames"]) for m in log.topic("/train/iteration")] == [(3, 24)]
+    (cfg,) = log.topic("/run/config")
+    assert cfg["config"]["train"]["frames"] == 24 and cfg["config"]["mode"] == "train"
+    assert cfg["config"]["learner"]["frames_per_batch"] == 8  # the run's own overrides
+
+
+def test_resume_refuses_what_it_cannot_resume(tmp_path):
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "early" / ".hydra").mkdir(parents=True)
+    (tmp_path / "early" / ".hydra" / "overrides.yaml").write_text("[]\n")
+    for where, message in [("empty", "not a run directory"), ("early", "no policy.pt")]:
+        res = inhand_exp(f"resume={tmp_path / where}", cwd=tmp_path, fast=False)
+        assert res.returncode == 2 and message in res.stderr, res.stderr
+        assert "Traceback" not in res.stderr
+    assert sorted(p.name for p in (tmp_path / "early").iterdir()) == [".hydra"]

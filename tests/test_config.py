@@ -122,6 +122,8 @@ def test_impossible_values_name_field_and_value(compose_cfg, override, message):
     (["object=cube", "primitives=pole"], "primitives=pole does not fit object=cube"),
     (["primitives.repose_duration_s=0.501"], "not a whole number of physics steps"),
     (["mode=eval"], "mode=eval needs checkpoint=PATH"),
+    (["learner.frames_per_batch=100"],
+     "learner.frames_per_batch=100 must be a multiple of train.num_envs=16"),
     (["hand.joint_lower_rad=[1,0]", "hand.joint_upper_rad=[0,1]"],
      "hand.joint_lower_rad[0] < hand.joint_upper_rad[0]"),
 ])

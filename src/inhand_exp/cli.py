@@ -1,4 +1,10 @@
-"""Thin entry points: ``inhand-exp`` (the Hydra app)."""
+"""Thin entry points: ``inhand-exp`` (the Hydra app).
+
+``inhand-exp resume=RUN_DIR [overrides]`` continues an interrupted training: it re-composes the
+run's own overrides (``RUN_DIR/.hydra/overrides.yaml``) followed by the new ones, writes into
+``RUN_DIR`` without touching what is there (a new ``run-2.mcap``...), and trains from
+``RUN_DIR/policy.pt`` up to ``train.frames``.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +13,7 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError, register_configs, validate
 from inhand_exp.learn.ppo import CheckpointError
@@ -16,6 +22,15 @@ from inhand_exp.task.goals import GoalsError
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 
 register_configs()
+
+
+def fresh_log_path(run_dir: Path, name: str) -> Path:
+    """``run_dir/name``, or ``run-2.mcap``, ``run-3.mcap``... if taken: nothing is overwritten."""
+    path, k = run_dir / name, 2
+    while path.exists():
+        path = run_dir / f"{Path(name).stem}-{k}{Path(name).suffix}"
+        k += 1
+    return path
 
 
 def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
@@ -29,15 +44,40 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
     for what, name in (("checkpoint", cfg.checkpoint), ("goal file", cfg.eval.goals_file)):
         if name and not Path(name).is_file():  # before anything is written
             raise FileNotFoundError(f"{what} {name} not found")
-    log_path = run_dir / cfg.log.file
+    log_path = fresh_log_path(run_dir, cfg.log.file) if cfg.resume else run_dir / cfg.log.file
     with RunLog(log_path, chunk_size=cfg.log.chunk_size_bytes,
                 flush_every_s=cfg.log.flush_every_s) as log:
         log.write("/run/config", run_config_message(cfg, run_dir, overrides))
         log.flush()
         from inhand_exp.experiment import run_job
 
-        run_job(cfg, run_dir, log)
+        run_job(cfg, run_dir, log, resume=bool(cfg.resume))
     return log_path
+
+
+def resume_argv(argv: list[str]) -> list[str]:
+    """Turn ``resume=RUN_DIR [overrides]`` into the run's overrides + the new ones.
+
+    Checked before Hydra runs, so a bad directory writes nothing.
+    """
+    given = [a for a in argv if a.startswith("resume=")]
+    if not given:
+        return argv
+    if any(a in ("-m", "--multirun") or a.startswith("hydra/launcher") for a in argv):
+        raise ConfigError("resume= continues one run; it cannot be combined with --multirun")
+    run_dir = Path(given[-1].split("=", 1)[1]).expanduser().resolve()
+    saved = run_dir / ".hydra" / "overrides.yaml"
+    if not saved.is_file():
+        raise FileNotFoundError(f"resume={run_dir}: not a run directory of inhand-exp "
+                                f"({saved} not found)")
+    if not (run_dir / "policy.pt").is_file():
+        raise FileNotFoundError(f"resume={run_dir}: no policy.pt there (the run stopped before "
+                                f"its first checkpoint); start it again instead")
+    before = [o for o in OmegaConf.load(saved)
+              if not o.startswith(("resume=", "hydra.run.dir=", "checkpoint="))]
+    rest = [a for a in argv if not a.startswith("resume=")]
+    return [*before, *rest, f"resume={run_dir}", f"hydra.run.dir={run_dir}",
+            "hydra.output_subdir=null"]
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
@@ -55,4 +95,9 @@ def main() -> None:
     if not (CONF_DIR / "config.yaml").is_file():
         sys.exit(f"inhand-exp: config tree not found at {CONF_DIR}; "
                  "install from a source checkout with `pip install -e .`")
+    try:
+        sys.argv[1:] = resume_argv(sys.argv[1:])
+    except (ConfigError, FileNotFoundError) as err:
+        print(f"inhand-exp: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
     _app()

@@ -198,7 +198,7 @@ class TrainConfig:
     num_envs: int = spec(16, "Environments collecting in parallel.", gt=0)
     workers: int = spec(2, "Worker processes for the environments (<= cores).", gt=0)
     backend: EnvBackend = spec(EnvBackend.parallel, "Batched env: parallel or serial.")
-    checkpoint_every: int = spec(10, "Iterations between checkpoints.", gt=0)
+    checkpoint_every: int = spec(1, "Iterations between checkpoints.", gt=0)
 
 
 @dataclass
@@ -233,7 +233,8 @@ class Config:
     log: LogConfig = field(default_factory=LogConfig)
     seed: int = spec(0, "Seed of everything random in the run.", ge=0)
     mode: Mode = spec(Mode.train_eval, "What the run does: train, eval or train_eval.")
-    checkpoint: str | None = spec(None, "Policy checkpoint to evaluate or resume from.")
+    checkpoint: str | None = spec(None, "Policy checkpoint to evaluate or to train on from.")
+    resume: str | None = spec(None, "Run directory of an interrupted training to continue.")
 
 
 GROUP_SCHEMAS: dict[str, type] = {
@@ -304,6 +305,9 @@ def _check_consistency(cfg: DictConfig) -> None:
     """Cross-field rules: matching object and primitives, whole step ratios, joint limits."""
     if cfg.mode == Mode.eval and not cfg.checkpoint:
         raise ConfigError("mode=eval needs checkpoint=PATH (a policy.pt of an earlier run)")
+    if cfg.learner.name == "ppo" and cfg.learner.frames_per_batch % cfg.train.num_envs:
+        raise ConfigError(f"learner.frames_per_batch={cfg.learner.frames_per_batch} must be a "
+                          f"multiple of train.num_envs={cfg.train.num_envs}")
     if cfg.object.name != cfg.primitives.name:
         raise ConfigError(f"primitives={cfg.primitives.name} does not fit object="
                           f"{cfg.object.name}; choose primitives={cfg.object.name}")

@@ -8,71 +8,115 @@ from __future__ import annotations
 
 import csv
 import importlib.resources
-import math
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 from omegaconf import DictConfig
 
 from inhand_exp.control.hand import HandModel
-from inhand_exp.envs.primitive_env import PrimitiveEnv
+from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.learn.evaluate import evaluate
 from inhand_exp.learn.ppo import PPO, PPOParams
+from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
+from inhand_exp.task.actions import action_table
 from inhand_exp.task.goals import goal_set, load_goals, save_goals
 
+CHECKPOINT = "policy.pt"
 
-def run_job(cfg: DictConfig, run_dir: Path, log: RunLog,
-            say: Callable[[str], None] = print) -> dict[str, float] | None:
-    """Train and/or evaluate; returns the evaluation summary when there is one."""
-    mode = str(cfg.mode.value if hasattr(cfg.mode, "value") else cfg.mode)
-    env = PrimitiveEnv(cfg, seed=cfg.seed)
-    ppo = PPO(OBS_DIM, len(env.actions), PPOParams.from_config(cfg.learner))
-    if cfg.checkpoint:
+
+def derived_seed(seed: int, *stream: int) -> int:
+    """A seed for one stream of a run (training envs after an iteration, evaluation...)."""
+    return int(np.random.SeedSequence([seed, *stream]).generate_state(1)[0])
+
+
+def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, say: Callable[[str], None] = print,
+            resume: bool = False) -> dict[str, float] | None:
+    """Train and/or evaluate; returns the evaluation summary when there is one.
+
+    ``resume``: continue the training whose checkpoint is in ``run_dir`` up to ``train.frames``
+    in all; otherwise a ``checkpoint`` is a starting point for ``train.frames`` more.
+    """
+    mode = str(getattr(cfg.mode, "value", cfg.mode))
+    actions = action_table(cfg.primitives)
+    ppo = PPO(OBS_DIM, len(actions), PPOParams.from_config(cfg.learner))
+    target = cfg.train.frames
+    if resume:
+        ppo.load(run_dir / CHECKPOINT)
+        say(f"resuming from {run_dir / CHECKPOINT}: iteration {ppo.iteration}, "
+            f"{ppo.frames} frames")
+    elif cfg.checkpoint:
         ppo.load(Path(cfg.checkpoint))
+        target += ppo.frames
     if mode in ("train", "train_eval"):
-        _train(cfg, env, ppo, run_dir, log, say)
+        _train(cfg, ppo, target, run_dir, log, say)
     if mode in ("eval", "train_eval"):
-        return _evaluate(cfg, ppo, run_dir, log, say)
+        return _evaluate(cfg, ppo, [a.name for a in actions], run_dir, log, say)
     return None
 
 
-def _train(cfg, env, ppo: PPO, run_dir: Path, log: RunLog, say) -> None:
+def _train(cfg, ppo: PPO, target: int, run_dir: Path, log: RunLog, say) -> None:
+    left = target - ppo.frames
+    if left <= 0:
+        say(f"training already has {ppo.frames} of train.frames={target} frames")
+        return
     start, frames0 = time.perf_counter(), ppo.frames
+    bar = ProgressBar(target, "frames", start=frames0, enabled=cfg.log.progress)
 
     def progress(iteration: int, m: dict[str, float]) -> None:
         wall = time.perf_counter() - start
-        rate = (m["frames"] - frames0) / wall if wall > 0 else 0.0
         log.write("/train/iteration", {
             "iteration": iteration, "frames": int(m["frames"]), "wall_s": wall,
             "losses": {k: m[k] for k in ("loss_objective", "loss_critic", "loss_entropy")},
             "mean_return": m["mean_reward"], "success_rate": m["success_rate"],
-            "drop_rate": m["drop_rate"], "actions_per_s": rate})
+            "drop_rate": m["drop_rate"], "actions_per_s": bar.rate(int(m["frames"]))})
         log.flush()
-        left = (cfg.train.frames - (m["frames"] - frames0)) / rate if rate > 0 else math.nan
-        say(f"iteration {iteration:4d}  frames {int(m['frames']):7d}  success "
-            f"{m['success_rate']:5.1%}  drops {m['drop_rate']:5.1%}  {rate:5.1f} actions/s  "
-            f"ETA {left / 60:5.1f} min")
+        bar.update(int(m["frames"]), f"it {iteration}  success {m['success_rate']:5.1%}  "
+                                     f"drops {m['drop_rate']:5.1%}")
 
-    ppo.train(env, cfg.train.frames, progress, checkpoint=run_dir / "policy.pt",
-              checkpoint_every=cfg.train.checkpoint_every)
-    say(f"policy saved to {run_dir / 'policy.pt'}")
+    env = batched_env(cfg, derived_seed(cfg.seed, 0, ppo.iteration))
+    try:
+        ppo.train(env, left, progress, checkpoint=run_dir / CHECKPOINT,
+                  checkpoint_every=cfg.train.checkpoint_every)
+    finally:
+        bar.close()
+        if not env.is_closed:  # the collector closes it when it ends
+            env.close()
+    say(f"policy saved to {run_dir / CHECKPOINT} ({ppo.frames} frames, "
+        f"{time.perf_counter() - start:.0f} s)")
 
 
-def _evaluate(cfg, ppo: PPO, run_dir: Path, log: RunLog, say) -> dict[str, float]:
+def _evaluate(cfg, ppo: PPO, names: list[str], run_dir: Path, log: RunLog, say
+              ) -> dict[str, float]:
     if cfg.eval.goals_file:
         goals = load_goals(cfg.eval.goals_file)
     else:
         model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
         goals = goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed)
     save_goals(goals, run_dir / "goals.csv")
-    env = PrimitiveEnv(cfg, goals=goals, seed=cfg.seed + 1)
     labels = {"object": cfg.object.name, "perturb": cfg.perturb.name, "noise": cfg.noise.name,
               "learner": cfg.learner.name, "seed": int(cfg.seed)}
-    summary = evaluate(env, ppo.actor, len(goals),
-                       on_episode=lambda r: log.write("/eval/episode", {**r, **labels}))
+    bar = ProgressBar(len(goals), "episodes", enabled=cfg.log.progress)
+    results = []
+
+    def on_episode(rec: dict) -> None:
+        log.write("/eval/episode", {**rec, **labels})
+        results.append(rec["success"])
+        bar.update(len(results), f"success {np.mean(results):5.1%}")
+
+    env = batched_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
+                      num_envs=min(cfg.train.num_envs, len(goals)),
+                      states_hz=cfg.log.sim_state_hz)
+    try:
+        summary = evaluate(env, ppo.actor, goals, on_episode=on_episode,
+                           on_action=lambda r: log.write("/episode/action", r),
+                           on_state=lambda r: log.write("/sim/state", r), action_names=names)
+    finally:
+        bar.close()
+        env.close()
     say(table(summary, cfg))
     return summary
 

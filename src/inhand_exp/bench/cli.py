@@ -3,6 +3,7 @@
     inhand-bench speed [--object pole|cube] [--seconds S] [overrides...]
     inhand-bench primitives [--object pole|cube] [--trials N] [--seed S] [--workers W]
                             [--only hold,repose,...] [overrides...]
+    inhand-bench env [--workers W] [--steps N] [--seed S] [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -125,13 +126,13 @@ def _print_row(name: str, r: dict) -> None:
 
 # --- speed --------------------------------------------------------------------------------
 
-def speed(args, cfg: DictConfig) -> dict:
-    """Control-loop and raw stepSimulation rates measured in the same runs of a hold."""
+def hold_rates(cfg: DictConfig, seconds: float, seed: int) -> tuple[float, float]:
+    """(raw stepSimulation, full control loop) steps/s, measured in the same runs of a hold."""
     bench = trials.Bench(cfg)
-    rng = np.random.default_rng(args.seed)
+    rng = np.random.default_rng(seed)
     world = bench.world
     loop_steps, loop_wall, raw_wall = 0, 0.0, 0.0
-    deadline = time.perf_counter() + args.seconds
+    deadline = time.perf_counter() + seconds
     while time.perf_counter() < deadline:
         contacts = bench.start(rng)
         prim = trials.Repose(bench.model, contacts, np.zeros(3), 2.0, bench.gains)
@@ -141,13 +142,18 @@ def speed(args, cfg: DictConfig) -> dict:
         loop_wall += time.perf_counter() - t
         loop_steps += out.steps
         raw_wall += world.step_wall_s
+    return loop_steps / raw_wall, loop_steps / loop_wall
+
+
+def speed(args, cfg: DictConfig) -> dict:
+    """Control-loop and raw stepSimulation rates, and the wall time of each primitive."""
+    raw, loop = hold_rates(cfg, args.seconds, args.seed)
     ms = {}
     for name in ("repose", "slide", "flip_left", "flip_right"):
         runs = [r for r in (_run_trial(cfg, ("none", (0.0, 0.0)), name, args.seed, i)
                             for i in range(args.primitive_runs)) if r is not None]
         if runs:
             ms[name] = 1e3 * float(np.mean([r.wall_s for r in runs]))
-    raw, loop = loop_steps / raw_wall, loop_steps / loop_wall
     print(f"stepSimulation alone: {raw:10.0f} steps/s  (inside the loop, same run)")
     print(f"full control loop:    {loop:10.0f} steps/s  ratio {loop / raw:.1%}")
     for name, v in ms.items():
@@ -159,12 +165,14 @@ def speed(args, cfg: DictConfig) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", choices=("speed", "primitives"))
+    parser.add_argument("what", choices=("speed", "primitives", "env"))
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
                         help="trials per section (default: the milestone's counts)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=int, default=1, help="worker processes")
+    parser.add_argument("--steps", type=int, default=8,
+                        help="env: steps of the whole batch (train.num_envs actions each)")
     parser.add_argument("--only", default="", help="comma-separated sections")
     parser.add_argument("--seconds", type=float, default=5.0, help="speed: loop timing budget")
     parser.add_argument("--primitive-runs", type=int, default=5,
@@ -177,5 +185,11 @@ def main(argv: list[str] | None = None) -> None:
         cfg = load_config(args.object, args.overrides)
     except (ConfigError, ConfigCompositionException) as err:
         sys.exit(f"inhand-bench: config error: {err}".splitlines()[0])
-    result = speed(args, cfg) if args.what == "speed" else primitives(args, cfg)
+    if args.what == "env":
+        from inhand_exp.bench.throughput import env_throughput
+
+        raw, _ = hold_rates(cfg, 2.0, args.seed)
+        result = env_throughput(cfg, args.workers, args.steps, args.seed, raw)
+    else:
+        result = speed(args, cfg) if args.what == "speed" else primitives(args, cfg)
     print(json.dumps(result))

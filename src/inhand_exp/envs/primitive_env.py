@@ -4,7 +4,10 @@ Clocks: the policy acts once per primitive; the primitive's torque law runs ever
 (``sim.timestep_s``) for the primitive's duration. Observation (paper IV-A): joint angles and
 velocities (12), the observed object pose ``X_t`` (3, with uniform noise under ``noise=paper``)
 and the goal ``X_g`` (3); ``action_mask`` says which actions the feasibility filter allows.
-``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation.
+``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
+with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
+into ``OUTCOMES``) and, when ``states_hz`` > 0, the ``states`` snapshots taken during it (see
+``envs.snapshots``). None of these is part of the policy's ``observation``.
 Filter modes: ``mask`` (only allowed actions may be taken; an episode with none ends), ``penalty``
 (the paper: a rejected action costs ``task.reward_invalid`` and does nothing) and ``off`` (every
 action is attempted; one its primitive refuses does nothing and costs the same).
@@ -16,12 +19,14 @@ import numpy as np
 import torch
 from omegaconf import DictConfig
 from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Binary, Categorical, Unbounded
 from torchrl.envs import EnvBase
 
 from inhand_exp.config import ObjectConfig, PerturbConfig
 from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import Gains
+from inhand_exp.envs.snapshots import STATE_WIDTH, Snapshots
 from inhand_exp.envs.specs import declare_mid_level_specs
 from inhand_exp.sim.world import ObjectSpec, World
 from inhand_exp.task.actions import action_table, feasibility, make_primitive
@@ -29,6 +34,8 @@ from inhand_exp.task.goals import GoalPair, sample_pair
 from inhand_exp.task.rules import Rules, flip_useful, reached, reward
 
 PRESS_M = 0.0005  # initial fingertip press into the surface (m)
+# how the last action ended: an execute() reason, "rejected" by the filter, or "none" (reset)
+OUTCOMES = ("none", "done", "infeasible", "lost_contact", "unstable", "timeout", "rejected")
 
 
 def _object_config(node) -> ObjectConfig:
@@ -40,10 +47,11 @@ class PrimitiveEnv(EnvBase):
 
     ``goals`` fixes the episodes' (X0, Xg) pairs, taken in order (evaluation); without it each
     reset draws a fresh pair of the ``goals`` group from the training distribution.
+    ``states_hz`` > 0 records ``/sim/state`` snapshots at that rate of simulated time.
     """
 
     def __init__(self, cfg: DictConfig, goals: list[GoalPair] | None = None,
-                 seed: int | None = None):
+                 seed: int | None = None, states_hz: float = 0.0):
         super().__init__(device="cpu", batch_size=torch.Size([]))
         obj = _object_config(cfg.object)
         p = cfg.perturb
@@ -62,8 +70,17 @@ class PrimitiveEnv(EnvBase):
         self.noise = np.array([cfg.noise.xz_m, cfg.noise.xz_m, cfg.noise.theta_rad])
         self.actions = action_table(cfg.primitives)
         self.goals, self.episode = goals, 0
-        n = len(self.actions)
-        declare_mid_level_specs(self, n)
+        self.snapshots = None
+        if states_hz > 0:
+            longest = max(v for k, v in cfg.primitives.items() if k.endswith("_duration_s"))
+            self.snapshots = Snapshots(self.world, states_hz, longest)
+        declare_mid_level_specs(self, len(self.actions))
+        self.observation_spec["pose"] = Unbounded(shape=(3,), dtype=torch.float32)
+        self.observation_spec["valid"] = Binary(n=1, dtype=torch.bool)
+        self.observation_spec["outcome"] = Categorical(len(OUTCOMES), shape=(1,))
+        if self.snapshots is not None:
+            self.observation_spec["states"] = Unbounded(
+                shape=(self.snapshots.capacity, STATE_WIDTH), dtype=torch.float32)
         self.set_seed(0 if seed is None else seed)
 
     # --- seeding and observing ----------------------------------------------------------
@@ -78,7 +95,7 @@ class PrimitiveEnv(EnvBase):
         offset = self.rng.uniform(-self.noise, self.noise) if self.noise.any() else np.zeros(3)
         return Observation(q, qd, pose + offset, twist, 0.0), offset
 
-    def _output(self, **done) -> TensorDict:
+    def _output(self, valid: bool, outcome: str, **done) -> TensorDict:
         obs, self.offset = self._observe()
         self.mask, self.planned = feasibility(self.actions, self.model, self.contacts,
                                               self.gains, self.prim, obs)
@@ -91,13 +108,19 @@ class PrimitiveEnv(EnvBase):
             flags["done"] = torch.tensor([True])
             mask = np.ones_like(mask)  # keep the distribution defined
         self.action_spec.update_mask(torch.from_numpy(mask))  # rand_action samples allowed ones
-        return TensorDict({
+        td = TensorDict({
             "observation": torch.from_numpy(vec),
             "action_mask": torch.from_numpy(mask),
             "success": torch.tensor([self.success]),
             "dropped": torch.tensor([self.dropped]),
             "sim_time_s": torch.tensor([self.sim_time], dtype=torch.float32),
+            "pose": torch.tensor(self.world.object_pose(), dtype=torch.float32),
+            "valid": torch.tensor([valid]),
+            "outcome": torch.tensor([OUTCOMES.index(outcome)]),
             **flags}, batch_size=())
+        if self.snapshots is not None:
+            td["states"] = torch.from_numpy(self.snapshots.table())
+        return td
 
     # --- episodes -----------------------------------------------------------------------
 
@@ -109,25 +132,30 @@ class PrimitiveEnv(EnvBase):
         self.episode += 1
         self.pair, self.goal, self.contacts = pair, pair.xg.copy(), pair.contacts
         self.world.reset(pair.x0, self.true_model.grasp_q(pair.contacts, pair.x0, PRESS_M))
+        if self.snapshots is not None:
+            self.snapshots.new_episode()
         self.n_actions, self.n_invalid, self.sim_time = 0, 0, 0.0
         self.success, self.dropped = False, False
         false = False
-        return self._output(done=false, terminated=false, truncated=false)
+        return self._output(True, "none", done=false, terminated=false, truncated=false)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDict:
         a = int(tensordict["action"])
         action = self.actions[a]
         allowed = bool(self.mask[a])
-        useful, valid = False, True
+        useful, valid, outcome = False, True, "rejected"
+        if self.snapshots is not None:
+            self.snapshots.new_action()
         if not allowed and self.filter != "off":
             valid = False  # rejected by the filter: no motion
         else:
             prim = self.planned[a]  # planned by the filter on this very observation
             if prim is None:
                 prim = make_primitive(action, self.model, self.contacts, self.gains, self.prim)
-            out = execute(self.world, prim, self.offset, started=self.planned[a] is not None)
+            world = self.world if self.snapshots is None else self.snapshots
+            out = execute(world, prim, self.offset, started=self.planned[a] is not None)
             self.sim_time += out.sim_time_s
-            valid = out.reason != "infeasible"
+            valid, outcome = out.reason != "infeasible", out.reason
             self.dropped = out.reason in ("lost_contact", "unstable")
             if out.ok and action.kind in ("flip", "release", "land"):
                 self.contacts = prim.result
@@ -142,7 +170,7 @@ class PrimitiveEnv(EnvBase):
         terminated = self.success or self.dropped
         truncated = not terminated and self.n_actions >= self.rules.max_actions
         r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful)
-        td = self._output(done=terminated or truncated, terminated=terminated,
+        td = self._output(valid, outcome, done=terminated or truncated, terminated=terminated,
                           truncated=truncated)
         td["reward"] = torch.tensor([r], dtype=torch.float32)
         return td

@@ -4,7 +4,7 @@ The state is a position on a line of ``size`` cells and a goal cell; action 0 st
 action 1 steps left, every other action is masked out (as infeasible primitives are). Reaching the
 goal pays +5 and ends the episode; ``max_steps`` actions truncate it. Same keys and specs as
 ``PrimitiveEnv``: ``observation`` (18 floats), ``action_mask``, ``success``, ``dropped``,
-``sim_time_s``.
+``sim_time_s``; the position and the goal are the x of ``X_t`` and ``X_g``.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.envs import EnvBase
 
 from inhand_exp.envs.specs import OBS_DIM, declare_mid_level_specs
+
+CELL_M = 0.01  # a cell is one repose step along x
 
 
 class ToyLineEnv(EnvBase):
@@ -29,7 +31,8 @@ class ToyLineEnv(EnvBase):
 
     def _out(self, success: bool, done: bool, truncated: bool) -> TensorDict:
         obs = torch.zeros(OBS_DIM)
-        obs[0], obs[1] = self.pos / self.size, self.goal / self.size
+        obs[12:15] = torch.tensor([CELL_M * self.pos, 0.2, 0.0])  # X_t
+        obs[15:18] = torch.tensor([CELL_M * self.goal, 0.2, 0.0])  # X_g
         mask = torch.zeros(self.n, dtype=torch.bool)
         mask[:2] = True
         self.action_spec.update_mask(mask)

@@ -1,50 +1,106 @@
 """Evaluation (paper section IV): episodes on a fixed goal set, judged from the simulated state.
 
-Each episode yields one record (the ``/eval/episode`` fields); the summary has the success, drop
-and timeout rates and the mean simulated time of the successful episodes.
+The environment is a batch of ``n`` primitive environments built on the same goal list (see
+``envs.batched``): environment ``i`` plays goals ``i, i + n, i + 2n, ...``, so the episode number
+is the goal's index and the results do not depend on how the batch runs. Each episode yields one
+record (the ``/eval/episode`` fields), each action one ``/episode/action`` record and, when the
+environment records them, the ``/sim/state`` snapshots; the summary has the success, drop and
+timeout rates and the mean simulated time of the successful episodes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 import torch
+from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from inhand_exp.envs.primitive_env import PrimitiveEnv
+from inhand_exp.envs.primitive_env import OUTCOMES
+from inhand_exp.envs.snapshots import rows_to_messages
+from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.rules import pose_error
 
 Record = dict[str, Any]
+Sink = Callable[[Record], None]
 
 
-def run_episode(env: PrimitiveEnv, policy, episode: int) -> Record:
-    """One episode from the env's next goal pair; the policy acts on its most likely action."""
+def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
+             on_episode: Sink | None = None, on_action: Sink | None = None,
+             on_state: Sink | None = None, action_names: Sequence[str] | None = None
+             ) -> dict[str, float]:
+    """Play every pair of ``goals`` once with the policy's most likely actions; summarise."""
+    n = max(1, env.batch_size.numel())
+    need = np.array([len(goals[i::n]) for i in range(n)])
+    played = np.zeros(n, dtype=int)  # finished episodes of each environment
+    steps, invalid = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
+    records: list[Record] = []
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-        td = env.rollout(env.rules.max_actions + 1, policy=policy, break_when_any_done=True)
-    last = td[-1]["next"]
-    success, dropped = bool(last["success"]), bool(last["dropped"])
-    final = env.world.object_pose()
-    ex, ez, eth = pose_error(final, env.goal)
-    return {"episode": episode, "group": env.pair.group, "success": success,
-            "dropped": dropped, "timeout": not (success or dropped),
-            "sim_time_s": float(env.sim_time), "n_actions": int(env.n_actions),
-            "n_invalid": int(env.n_invalid), "x0": env.pair.x0.tolist(),
-            "xg": env.goal.tolist(), "final_pose": final.tolist(),
-            "final_err_m": float(np.hypot(ex, ez)), "final_err_rad": float(eth)}
-
-
-def evaluate(env: PrimitiveEnv, policy, episodes: int,
-             on_episode: Callable[[Record], None] | None = None) -> dict[str, float]:
-    """Run ``episodes`` episodes and summarise them."""
-    records = []
-    for k in range(episodes):
-        rec = run_episode(env, policy, k)
-        records.append(rec)
-        if on_episode is not None:
-            on_episode(rec)
+        td = env.reset()
+        _states(td, range(n), played, n, on_state)
+        while (played < need).any():
+            td = policy(td)
+            td, root = env.step_and_maybe_reset(td)
+            flat = td.reshape(-1)
+            done = flat["next", "done"].reshape(n).tolist()
+            for i in range(n):
+                if played[i] >= need[i]:
+                    continue
+                ep = i + n * int(played[i])
+                row = flat[i]
+                if on_action is not None:
+                    on_action(_action(row, ep, int(steps[i]), action_names))
+                if on_state is not None and "states" in row["next"]:
+                    for msg in rows_to_messages(row["next", "states"].numpy(), ep):
+                        on_state(msg)
+                steps[i] += 1
+                invalid[i] += not bool(row["next", "valid"])
+                if done[i]:
+                    rec = _episode(row["next"], goals[ep], ep, int(steps[i]), int(invalid[i]))
+                    records.append(rec)
+                    if on_episode is not None:
+                        on_episode(rec)
+                    played[i] += 1
+                    steps[i], invalid[i] = 0, 0
+            _states(root, [i for i in range(n) if done[i]], played, n, on_state, need)
+            td = root
+    records.sort(key=lambda r: r["episode"])
     return summarise(records)
+
+
+def _states(td, envs, played, n: int, on_state: Sink | None, need=None) -> None:
+    """The snapshot taken at the start of each new episode of ``envs``."""
+    if on_state is None or "states" not in td:
+        return
+    flat = td.reshape(-1)
+    for i in envs:
+        if need is None or played[i] < need[i]:
+            for msg in rows_to_messages(flat[i]["states"].numpy(), i + n * int(played[i])):
+                on_state(msg)
+
+
+def _action(row, episode: int, step: int, names: Sequence[str] | None) -> Record:
+    a = int(row["action"])
+    nxt = row["next"]
+    return {"episode": episode, "step": step, "action": a,
+            "name": names[a] if names is not None else str(a),
+            "valid": bool(nxt["valid"]), "outcome": OUTCOMES[int(nxt["outcome"])],
+            "pose_before": row["pose"].tolist(), "pose_after": nxt["pose"].tolist(),
+            "sim_time_s": float(nxt["sim_time_s"]), "reward": float(nxt["reward"])}
+
+
+def _episode(last, pair: GoalPair, episode: int, n_actions: int, n_invalid: int) -> Record:
+    success, dropped = bool(last["success"]), bool(last["dropped"])
+    final = last["pose"].double().numpy()
+    ex, ez, eth = pose_error(final, pair.xg)
+    return {"episode": episode, "group": pair.group, "success": success,
+            "dropped": dropped, "timeout": not (success or dropped),
+            "sim_time_s": float(last["sim_time_s"]), "n_actions": n_actions,
+            "n_invalid": n_invalid, "x0": pair.x0.tolist(), "xg": pair.xg.tolist(),
+            "final_pose": final.tolist(), "final_err_m": float(np.hypot(ex, ez)),
+            "final_err_rad": float(eth)}
 
 
 def summarise(records: list[Record]) -> dict[str, float]:

@@ -22,6 +22,8 @@ from torchrl.modules import MLP, MaskedCategorical, ProbabilisticActor, ValueOpe
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
+from inhand_exp.learn.features import ObservationFeatures
+
 Progress = Callable[[int, dict[str, float]], None]
 
 
@@ -55,14 +57,17 @@ class PPOParams:
 
 def make_networks(obs_dim: int, n_actions: int, hidden: tuple[int, ...]
                   ) -> tuple[ProbabilisticActor, ValueOperator]:
-    """Masked categorical policy and value critic over ``observation``."""
-    logits = TensorDictModule(MLP(in_features=obs_dim, out_features=n_actions,
-                                  num_cells=list(hidden), activation_class=nn.Tanh),
-                              in_keys=["observation"], out_keys=["logits"])
+    """Masked categorical policy and value critic over ``observation`` (see ``features``)."""
+
+    def mlp(out: int) -> nn.Module:
+        features = ObservationFeatures(obs_dim)
+        return nn.Sequential(features, MLP(in_features=features.out_features, out_features=out,
+                                           num_cells=list(hidden), activation_class=nn.Tanh))
+
+    logits = TensorDictModule(mlp(n_actions), in_keys=["observation"], out_keys=["logits"])
     actor = ProbabilisticActor(logits, in_keys={"logits": "logits", "mask": "action_mask"},
                                distribution_class=MaskedCategorical, return_log_prob=True)
-    critic = ValueOperator(MLP(in_features=obs_dim, out_features=1, num_cells=list(hidden),
-                               activation_class=nn.Tanh), in_keys=["observation"])
+    critic = ValueOperator(mlp(1), in_keys=["observation"])
     return actor, critic
 
 
@@ -82,10 +87,11 @@ class PPO:
 
     def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:
-        """Collect ``total_frames`` more actions from ``env`` and learn from them."""
+        """Collect ``total_frames`` more actions (whole batches) from ``env``, learn from them."""
         p = self.params
+        batches = -(-total_frames // p.frames_per_batch)
         collector = Collector(env, self.actor, frames_per_batch=p.frames_per_batch,
-                              total_frames=total_frames,
+                              total_frames=batches * p.frames_per_batch,
                               auto_register_policy_transforms=False)  # not recurrent
         try:
             for batch in collector:

@@ -14,7 +14,6 @@ sets the state of any body.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import tempfile
 import time
@@ -248,8 +247,10 @@ class World:
         self._cid = None
 
     def __del__(self) -> None:
-        with contextlib.suppress(Exception):  # interpreter shutdown
+        try:  # noqa: SIM105 - contextlib may already be gone at interpreter shutdown
             self.close()
+        except Exception:
+            pass
 
     @property
     def client(self) -> int:

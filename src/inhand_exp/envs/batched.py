@@ -1,0 +1,83 @@
+"""Many primitive environments at once: ``workers`` processes, each stepping a ``SerialEnv``.
+
+The batch has shape ``(workers, num_envs // workers)``. The ``parallel`` backend runs each row in
+its own process (``ParallelEnv``); ``serial`` runs everything in this process, with the same
+layout, so both give the same numbers for the same seed. One seed seeds the whole batch; the
+sub-environments get the seeds TorchRL derives from it, in row-major order.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from functools import partial
+
+from omegaconf import DictConfig, OmegaConf
+from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
+
+from inhand_exp.config import ConfigError
+from inhand_exp.envs.primitive_env import PrimitiveEnv
+from inhand_exp.task.goals import GoalPair
+
+
+def _make_env(cfg: dict, goals: list[GoalPair] | None = None,
+              states_hz: float = 0.0) -> PrimitiveEnv:
+    return PrimitiveEnv(OmegaConf.create(cfg), goals=goals, states_hz=states_hz)
+
+
+def _make_row(cfg: dict, goals: list[list[GoalPair]] | None, per: int,
+              states_hz: float) -> SerialEnv:
+    kwargs = [{"cfg": cfg, "states_hz": states_hz,
+               "goals": None if goals is None else goals[j]} for j in range(per)]
+    return SerialEnv(per, _make_env, create_env_kwargs=kwargs)
+
+
+def layout(cfg: DictConfig, num_envs: int | None = None) -> tuple[int, int]:
+    """(worker processes, environments per worker) for ``cfg.train``.
+
+    Workers are capped at the core count and lowered until they split the environments evenly,
+    with a warning.
+    """
+    n = cfg.train.num_envs if num_envs is None else num_envs
+    cores = os.cpu_count() or 1
+    asked = min(cfg.train.workers, n)
+    workers = min(asked, cores)
+    while n % workers:  # rows of equal length
+        workers -= 1
+    if workers != asked:
+        warnings.warn(f"train.workers={cfg.train.workers} with {n} environments on {cores} "
+                      f"cores: using {workers} worker processes", stacklevel=2)
+    return workers, n // workers
+
+
+def split_goals(goals: list[GoalPair], n: int) -> list[list[GoalPair]]:
+    """Deal ``goals`` round-robin to ``n`` environments: environment ``i`` gets i, i+n, ..."""
+    if len(goals) < n:
+        raise ConfigError(f"{len(goals)} goal pairs cannot feed {n} environments; "
+                          f"lower train.num_envs")
+    return [goals[i::n] for i in range(n)]
+
+
+def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
+                num_envs: int | None = None, states_hz: float = 0.0) -> EnvBase:
+    """The batched primitive environment for ``cfg`` (``train.backend``), seeded with ``seed``.
+
+    ``goals``: a fixed goal set, dealt round-robin over the environments (see ``split_goals``);
+    without it every episode draws a training pair.
+    """
+    workers, per = layout(cfg, num_envs)
+    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    rows = [None] * workers
+    if goals is not None:
+        dealt = split_goals(goals, workers * per)
+        rows = [dealt[w * per:(w + 1) * per] for w in range(workers)]
+    kwargs = [{"cfg": plain, "goals": rows[w], "per": per, "states_hz": states_hz}
+              for w in range(workers)]
+    backend = str(getattr(cfg.train.backend, "value", cfg.train.backend))
+    if backend == "serial":
+        env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)
+    else:
+        env = ParallelEnv(workers, partial(_make_row), create_env_kwargs=kwargs,
+                          mp_start_method="spawn")
+    env.set_seed(seed)
+    return env

@@ -187,6 +187,8 @@ class TaskConfig:
     reward_goal: float = spec(5.0, "Reward on reaching the goal.")
     reward_invalid: float = spec(-0.01, "Reward of an infeasible action (penalty mode).")
     reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")
+    reward_progress: float = spec(0.0, "Shaping: reward per tolerance (1 cm, 0.1 rad) of "
+                                  "progress towards the goal; 0 is the paper's reward.")
     success_tol_m: float = spec(0.01, "Success tolerance on |dx| and |dz| (m).", gt=0)
     success_tol_rad: float = spec(0.1, "Success tolerance on |dtheta| (rad).", gt=0)
     max_actions: int = spec(50, "Time limit in mid-level actions.", gt=0)

@@ -10,7 +10,7 @@ import pytest
 from inhand_exp.config import HandConfig, ObjectConfig
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import HandModel
-from inhand_exp.task.rules import Rules, flip_useful, pose_error, reached, reward
+from inhand_exp.task.rules import Rules, flip_useful, pose_error, reached, reward, to_go
 
 
 def test_rules_from_config(compose_cfg):
@@ -39,6 +39,20 @@ def test_reward_terms_add_up():
     assert reward(r, valid=True, success=True, useful_flip=False) == pytest.approx(5.0)
     assert reward(r, valid=True, success=False, useful_flip=True) == pytest.approx(1.0)
     assert reward(r, valid=True, success=False, useful_flip=False) == 0.0
+    assert reward(r, valid=True, success=False, useful_flip=False, progress=3.0) == 0.0
+
+
+def test_progress_shaping_telescopes_to_the_distance_covered():
+    rules = Rules(reward_progress=0.1)
+    goal = np.array([0.0, 0.2, 0.0])
+    path = [np.array([0.05, 0.17, 0.4]), np.array([0.04, 0.18, 0.2]),
+            np.array([0.06, 0.18, 0.3]), np.array([0.005, 0.2, 0.05])]
+    assert to_go(path[0], goal, rules) == pytest.approx(5 + 3 + 4)
+    total = sum(reward(rules, valid=True, success=False, useful_flip=False,
+                       progress=to_go(a, goal, rules) - to_go(b, goal, rules))
+                for a, b in zip(path, path[1:], strict=False))
+    assert total == pytest.approx(0.1 * (to_go(path[0], goal, rules)
+                                         - to_go(path[-1], goal, rules)))
 
 
 def test_flip_useful_follows_the_angle_still_to_go():

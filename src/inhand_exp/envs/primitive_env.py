@@ -31,7 +31,7 @@ from inhand_exp.envs.specs import declare_mid_level_specs
 from inhand_exp.sim.world import ObjectSpec, World
 from inhand_exp.task.actions import action_table, feasibility, make_primitive
 from inhand_exp.task.goals import GoalPair, sample_pair
-from inhand_exp.task.rules import Rules, flip_useful, reached, reward
+from inhand_exp.task.rules import Rules, flip_useful, reached, reward, to_go
 
 PRESS_M = 0.0005  # initial fingertip press into the surface (m)
 # how the last action ended: an execute() reason, "rejected" by the filter, or "none" (reset)
@@ -142,6 +142,7 @@ class PrimitiveEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDict:
         a = int(tensordict["action"])
         action = self.actions[a]
+        before = to_go(self.world.object_pose(), self.goal, self.rules)
         allowed = bool(self.mask[a])
         useful, valid, outcome = False, True, "rejected"
         if self.snapshots is not None:
@@ -169,7 +170,9 @@ class PrimitiveEnv(EnvBase):
                                                     self.rules)
         terminated = self.success or self.dropped
         truncated = not terminated and self.n_actions >= self.rules.max_actions
-        r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful)
+        progress = before - to_go(self.world.object_pose(), self.goal, self.rules)
+        r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful,
+                   progress=progress)
         td = self._output(valid, outcome, done=terminated or truncated, terminated=terminated,
                           truncated=truncated)
         td["reward"] = torch.tensor([r], dtype=torch.float32)

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import torch
 from omegaconf import DictConfig
 
 from inhand_exp.control.hand import HandModel
@@ -107,13 +108,15 @@ def _evaluate(cfg, ppo: PPO, names: list[str], run_dir: Path, log: RunLog, say
         results.append(rec["success"])
         bar.update(len(results), f"success {np.mean(results):5.1%}")
 
+    torch.manual_seed(derived_seed(cfg.seed, 2))  # eval.sample draws from torch's generator
     env = batched_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
                       num_envs=min(cfg.train.num_envs, len(goals)),
                       states_hz=cfg.log.sim_state_hz)
     try:
         summary = evaluate(env, ppo.actor, goals, on_episode=on_episode,
                            on_action=lambda r: log.write("/episode/action", r),
-                           on_state=lambda r: log.write("/sim/state", r), action_names=names)
+                           on_state=lambda r: log.write("/sim/state", r), action_names=names,
+                           sample=cfg.eval.sample)
     finally:
         bar.close()
         env.close()

@@ -83,3 +83,23 @@ def test_same_seed_same_rollout(compose_cfg):
                           td["action"][:, None].float()], dim=-1)
 
     assert torch.equal(run(), run())
+
+
+@pytest.mark.parametrize(("angle", "seen_before", "paid"), [
+    (-0.6, False, 1.0),  # the flipped finger pushes the pole towards the goal angle
+    (0.6, False, 0.0),   # ... away from it
+    (-0.6, True, 0.0),   # useful, but the posture was already reached in this episode
+])
+def test_flip_reward_is_paid_for_useful_flips_to_new_postures(compose_cfg, angle, seen_before,
+                                                              paid):
+    start = Contacts(Posture((Face.TOP, Face.BOTTOM, Face.TOP)), (-0.07, -0.03, 0.12))
+    pair = GoalPair("hard", X0.copy(), X0 + np.array([0.0, 0.0, angle]), start)
+    env = PrimitiveEnv(compose_cfg(), goals=[pair], seed=0)
+    td = env.reset()
+    if seen_before:
+        env.postures.add(Posture((Face.TOP, Face.BOTTOM, Face.BOTTOM)))
+    flip = next(a.index for a in env.actions if a.name == "flip right")
+    assert td["action_mask"][flip]
+    out = env.step(td.set("action", torch.tensor(flip)))["next"]
+    assert str(env.contacts.posture) == "top/bottom/bottom"
+    assert out["reward"].item() == pytest.approx(paid)

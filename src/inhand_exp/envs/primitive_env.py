@@ -131,6 +131,7 @@ class PrimitiveEnv(EnvBase):
             pair = sample_pair(self.model, self.group, self.rng)
         self.episode += 1
         self.pair, self.goal, self.contacts = pair, pair.xg.copy(), pair.contacts
+        self.postures = {pair.contacts.posture}  # reached so far in this episode
         self.world.reset(pair.x0, self.true_model.grasp_q(pair.contacts, pair.x0, PRESS_M))
         if self.snapshots is not None:
             self.snapshots.new_episode()
@@ -163,7 +164,11 @@ class PrimitiveEnv(EnvBase):
             pose, q = self.world.object_pose(), self.world.joint_q()
             self.contacts = self.model.measured(self.contacts, pose, q)
             if out.ok and action.kind == "flip":
-                useful = flip_useful(self.model, self.contacts, action.finger, pose, self.goal)
+                # paid once per posture and episode: flipping back and forth earns nothing
+                fresh = self.contacts.posture not in self.postures
+                self.postures.add(self.contacts.posture)
+                useful = fresh and flip_useful(self.model, self.contacts, action.finger, pose,
+                                               self.goal)
         self.n_invalid += not valid
         self.n_actions += 1
         self.success = not self.dropped and reached(self.world.object_pose(), self.goal,

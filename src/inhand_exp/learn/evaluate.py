@@ -29,15 +29,17 @@ Sink = Callable[[Record], None]
 
 def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
              on_episode: Sink | None = None, on_action: Sink | None = None,
-             on_state: Sink | None = None, action_names: Sequence[str] | None = None
-             ) -> dict[str, float]:
-    """Play every pair of ``goals`` once with the policy's most likely actions; summarise."""
+             on_state: Sink | None = None, action_names: Sequence[str] | None = None,
+             sample: bool = False) -> dict[str, float]:
+    """Play every pair of ``goals`` once with the policy's most likely actions (``sample``:
+    actions drawn from it, with torch's global generator); summarise."""
     n = max(1, env.batch_size.numel())
     need = np.array([len(goals[i::n]) for i in range(n)])
     played = np.zeros(n, dtype=int)  # finished episodes of each environment
     steps, invalid = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
     records: list[Record] = []
-    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+    mode = ExplorationType.RANDOM if sample else ExplorationType.DETERMINISTIC
+    with set_exploration_type(mode), torch.no_grad():
         td = env.reset()
         _states(td, range(n), played, n, on_state)
         while (played < need).any():

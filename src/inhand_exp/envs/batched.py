@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import warnings
-from functools import partial
 
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
@@ -77,7 +76,7 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
     if backend == "serial":
         env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)
     else:
-        env = ParallelEnv(workers, partial(_make_row), create_env_kwargs=kwargs,
+        env = ParallelEnv(workers, _make_row, create_env_kwargs=kwargs,
                           mp_start_method="spawn")
     env.set_seed(seed)
     return env

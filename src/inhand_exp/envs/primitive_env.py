@@ -88,15 +88,16 @@ class PrimitiveEnv(EnvBase):
     def _set_seed(self, seed: int | None) -> None:
         self.rng = np.random.default_rng(seed)
 
-    def _observe(self) -> tuple[Observation, np.ndarray]:
-        """The controllers' and the policy's view: true joints, object pose with noise."""
+    def _observe(self) -> tuple[Observation, np.ndarray, np.ndarray]:
+        """The controllers' and the policy's view (true joints, object pose with noise), the
+        noise drawn, and the true pose."""
         pose, twist = self.world.object_state()
         q, qd = self.world.joint_state()
         offset = self.rng.uniform(-self.noise, self.noise) if self.noise.any() else np.zeros(3)
-        return Observation(q, qd, pose + offset, twist, 0.0), offset
+        return Observation(q, qd, pose + offset, twist, 0.0), offset, pose
 
     def _output(self, valid: bool, outcome: str, **done) -> TensorDict:
-        obs, self.offset = self._observe()
+        obs, self.offset, self.pose = self._observe()
         self.mask, self.planned = feasibility(self.actions, self.model, self.contacts,
                                               self.gains, self.prim, obs)
         mask = self.mask if self.filter == "mask" else np.ones_like(self.mask)
@@ -114,7 +115,7 @@ class PrimitiveEnv(EnvBase):
             "success": torch.tensor([self.success]),
             "dropped": torch.tensor([self.dropped]),
             "sim_time_s": torch.tensor([self.sim_time], dtype=torch.float32),
-            "pose": torch.tensor(self.world.object_pose(), dtype=torch.float32),
+            "pose": torch.tensor(self.pose, dtype=torch.float32),
             "valid": torch.tensor([valid]),
             "outcome": torch.tensor([OUTCOMES.index(outcome)]),
             **flags}, batch_size=())
@@ -143,7 +144,7 @@ class PrimitiveEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDict:
         a = int(tensordict["action"])
         action = self.actions[a]
-        before = to_go(self.world.object_pose(), self.goal, self.rules)
+        before = to_go(self.pose, self.goal, self.rules)  # as observed at the last output
         allowed = bool(self.mask[a])
         useful, valid, outcome = False, True, "rejected"
         if self.snapshots is not None:
@@ -171,13 +172,12 @@ class PrimitiveEnv(EnvBase):
                                                self.goal)
         self.n_invalid += not valid
         self.n_actions += 1
-        self.success = not self.dropped and reached(self.world.object_pose(), self.goal,
-                                                    self.rules)
+        after = self.world.object_pose()
+        self.success = not self.dropped and reached(after, self.goal, self.rules)
         terminated = self.success or self.dropped
         truncated = not terminated and self.n_actions >= self.rules.max_actions
-        progress = before - to_go(self.world.object_pose(), self.goal, self.rules)
         r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful,
-                   progress=progress)
+                   progress=before - to_go(after, self.goal, self.rules))
         td = self._output(valid, outcome, done=terminated or truncated, terminated=terminated,
                           truncated=truncated)
         td["reward"] = torch.tensor([r], dtype=torch.float32)

@@ -55,7 +55,7 @@ class Snapshots:
         """The rows since the last ``new_action``/``new_episode``, NaN-padded to ``capacity``."""
         out = np.full((self.capacity, STATE_WIDTH), np.nan, dtype=np.float32)
         if self.rows:
-            out[:len(self.rows)] = np.asarray(self.rows[:self.capacity])
+            out[:len(self.rows)] = np.asarray(self.rows)  # step() keeps to capacity
         return out
 
 

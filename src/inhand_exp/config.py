@@ -131,6 +131,9 @@ class GoalsConfig:
     test_pairs: int = spec(500, "Test (X0, Xg) pairs in the group.", gt=0)
     train_pairs: int = spec(20000, "Training pairs, drawn apart from the test set.", gt=0)
     seed: int = spec(1234, "Seed of the dataset, the same for every learner.", ge=0)
+    train_groups: list[str] = spec([], "Groups the training episodes are drawn from, "
+                                   "uniformly; empty: this group only.",
+                                   choices=("easy", "medium", "hard"))
 
 
 @dataclass
@@ -152,6 +155,9 @@ class PPOConfig(LearnerConfig):
     epochs: int = spec(4, "Optimisation epochs per batch.", gt=0)
     minibatch_size: int = spec(256, "Minibatch size.", gt=0)
     max_grad_norm: float = spec(1.0, "Gradient clipping norm.", gt=0)
+    grasp_features: bool = spec(True, "Also feed the networks each fingertip's place on the "
+                                "object (forward kinematics of q in the frame of X_t) and the "
+                                "feasibility mask; false: the paper's q, qd, X_t, X_g only.")
 
 
 @dataclass

@@ -20,6 +20,7 @@ from inhand_exp.control.hand import HandModel
 from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.learn.evaluate import evaluate
+from inhand_exp.learn.features import HandGeometry
 from inhand_exp.learn.ppo import PPO, PPOParams
 from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
@@ -43,7 +44,8 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, say: Callable[[str], No
     """
     mode = str(getattr(cfg.mode, "value", cfg.mode))
     actions = action_table(cfg.primitives)
-    ppo = PPO(OBS_DIM, len(actions), PPOParams.from_config(cfg.learner))
+    hand = HandGeometry.from_config(cfg.hand) if cfg.learner.grasp_features else None
+    ppo = PPO(OBS_DIM, len(actions), PPOParams.from_config(cfg.learner), hand)
     target = cfg.train.frames
     if resume:
         ppo.load(run_dir / CHECKPOINT)

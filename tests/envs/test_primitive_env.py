@@ -103,3 +103,15 @@ def test_flip_reward_is_paid_for_useful_flips_to_new_postures(compose_cfg, angle
     out = env.step(td.set("action", torch.tensor(flip)))["next"]
     assert str(env.contacts.posture) == "top/bottom/bottom"
     assert out["reward"].item() == pytest.approx(paid)
+
+
+def test_training_episodes_mix_the_listed_groups(compose_cfg):
+    mixed = PrimitiveEnv(compose_cfg("goals=easy", "goals.train_groups=[medium,hard]"), seed=0)
+    plain = PrimitiveEnv(compose_cfg("goals=easy"), seed=0)
+    groups, own = set(), set()
+    for _ in range(12):
+        mixed.reset()
+        plain.reset()
+        groups.add(mixed.pair.group)
+        own.add(plain.pair.group)
+    assert groups == {"medium", "hard"} and own == {"easy"}

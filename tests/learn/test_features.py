@@ -27,3 +27,32 @@ def test_extras_pass_through_and_short_observations_are_refused():
     assert out.shape == (23,) and out[18:20].tolist() == [3.0, -4.0]
     with pytest.raises(ValueError, match="need 18"):
         ObservationFeatures(12)
+
+
+def test_fingertips_on_the_object_match_the_controllers_kinematics(compose_cfg):
+    """Forward kinematics in torch equals ``HandModel.measured`` on sampled grasps, and the
+    offset across the pole tells the face (a tip radius outside the surface)."""
+    import numpy as np
+
+    from inhand_exp.control.grasp import Face
+    from inhand_exp.control.hand import HandModel
+    from inhand_exp.control.sample import random_grasp
+    from inhand_exp.learn.features import HandGeometry
+
+    cfg = compose_cfg()
+    model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
+    features = ObservationFeatures(18, HandGeometry.from_config(cfg.hand), n_actions=14)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        pose, contacts, q = random_grasp(model, rng, press=0.0)
+        obs = torch.zeros(18, dtype=torch.float64)
+        obs[:6], obs[12:15] = torch.from_numpy(q), torch.from_numpy(pose)
+        tips = features.double().tips_in_object(obs).numpy()
+        assert np.allclose(tips[:, 0], contacts.coords, atol=1e-9)
+        side = cfg.object.width_m / 2 + cfg.hand.tip_radius_m
+        expected = [side if f == Face.TOP else -side for f in contacts.posture.faces]
+        assert np.allclose(tips[:, 1], expected, atol=1e-9)
+    out = features.float()(obs.float(), torch.ones(14, dtype=torch.bool))
+    assert out.shape == (features.out_features,) == (18 + 3 + 6 + 14,)
+    with pytest.raises(ValueError, match="action mask"):
+        features(obs.float())

@@ -104,3 +104,16 @@ def test_tiny_ppo_run_beats_random_on_easy_goals(compose_cfg):
         rates.append(evaluate(test, policy, goals)["success_rate"])
         test.close()
     assert rates[1] > rates[0] + 0.15, rates
+
+
+def test_checkpoint_with_other_network_inputs_is_refused(tmp_path):
+    from inhand_exp.learn.features import HandGeometry
+
+    hand = HandGeometry((-0.12, 0.0, 0.12), 0.0, 0.16, 0.16)
+    path = tmp_path / "policy.pt"
+    PPO(18, 14, SMALL, hand).save(path)
+    with pytest.raises(ValueError, match="grasp_features=True; this configuration has "
+                                         "learner.grasp_features=False"):
+        PPO(18, 14, SMALL).load(path)
+    back = PPO(18, 14, SMALL, hand)
+    back.load(path)  # the same inputs load

@@ -86,3 +86,19 @@ def test_missing_and_wrong_kind_of_file(tmp_path):
     (tmp_path / "goals.json").write_text("{}")
     with pytest.raises(GoalsError, match="CSV"):
         load_goals(tmp_path / "goals.json")
+
+
+def test_parquet_goal_files_load_like_csv(model, tmp_path):
+    pairs = goal_set(model, "medium", 3, seed=2)
+    path = tmp_path / "goals.parquet"
+    to_frame(pairs).to_parquet(path)
+    back = load_goals(path)
+    assert [p.group for p in back] == ["medium"] * 3
+    np.testing.assert_allclose([p.x0 for p in back], [p.x0 for p in pairs])
+    assert [p.contacts for p in back] == [p.contacts for p in pairs]
+    to_frame(pairs).assign(group="harder").to_parquet(tmp_path / "bad.parquet")
+    with pytest.raises(GoalsError, match="row 1: group must be one of"):
+        load_goals(tmp_path / "bad.parquet")
+    (tmp_path / "cut.parquet").write_bytes(path.read_bytes()[:40])
+    with pytest.raises(GoalsError, match="not a readable Parquet file"):
+        load_goals(tmp_path / "cut.parquet")

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Protocol
+from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -13,13 +13,19 @@ from inhand_exp.sim.world import state_problem
 
 @dataclass(frozen=True)
 class Observation:
-    """What the controllers see: joints exactly, the object pose possibly with noise."""
+    """What the controllers see: joints exactly, the object pose possibly with noise.
+
+    ``plans``: a cache of the grasp plans made from this very observation (see
+    ``repose.plan_for``), so that primitives planned on it together (the feasibility filter
+    plans every action) build each plan once; None disables it.
+    """
 
     q: np.ndarray
     qd: np.ndarray
     pose: np.ndarray
     twist: np.ndarray
     t: float  # time since the primitive started (s)
+    plans: dict[Any, Any] | None = field(default=None, compare=False)
 
 
 class Primitive(Protocol):

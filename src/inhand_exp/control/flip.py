@@ -26,6 +26,7 @@ from inhand_exp.control.repose import (
     GraspPlan,
     follow_qdd,
     object_wrench,
+    plan_for,
     push_torque,
     strict_hold,
 )
@@ -53,9 +54,8 @@ def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: Ga
     faces = [contacts.posture.faces[j] for j in others]
     if faces[0] != OPPOSITE[faces[1]]:
         return f"fingers {others} do not oppose each other"
-    full = GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains)
-    pair = GraspPlan.from_state(model, contacts.moved(finger, active=False), obs.pose, obs.q,
-                                gains)
+    full = plan_for(model, contacts, obs, gains)
+    pair = plan_for(model, contacts.moved(finger, active=False), obs, gains)
     zero = np.zeros(3)
     _, w_O = object_wrench(model, gains, obs.pose, zero, (obs.pose, zero, zero))
     if pair.squeeze.solve(w_O) is None or (contacts.active[finger]

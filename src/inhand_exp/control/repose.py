@@ -81,6 +81,23 @@ class GraspPlan:
         return cls(fingers, levers_O, normals_O, tips_O, sq)
 
 
+def plan_for(model: HandModel, contacts, obs, gains: Gains, sliding: int | None = None,
+             drag: float = 0.0) -> GraspPlan:
+    """``GraspPlan.from_state`` on ``obs``, built once per observation when it carries a cache.
+
+    Plans are immutable apart from the warm start of their per-step LP, which changes how fast
+    a solve is, not its answer.
+    """
+    if obs.plans is None:
+        return GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains, sliding, drag)
+    key = (id(model), contacts, gains, sliding, drag)
+    plan = obs.plans.get(key)
+    if plan is None:
+        plan = GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains, sliding, drag)
+        obs.plans[key] = plan
+    return plan
+
+
 def strict_hold(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
     """True when ``contacts`` (as commanded, active fingers only) admit a squeeze strictly inside
     the friction cones: the grasp holds whatever the small wrenches a controller asks for."""
@@ -221,7 +238,7 @@ class Repose:
         self.tol = tol
 
     def start(self, obs) -> str | None:
-        self.plan = GraspPlan.from_state(self.model, self.contacts, obs.pose, obs.q, self.gains)
+        self.plan = plan_for(self.model, self.contacts, obs, self.gains)
         _, w_O = object_wrench(self.model, self.gains, obs.pose, np.zeros(3),
                                (obs.pose, np.zeros(3), np.zeros(3)))
         if self.plan.squeeze.solve(w_O) is None:

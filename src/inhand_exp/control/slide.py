@@ -17,12 +17,12 @@ from inhand_exp.control.grasp import Contacts, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
     Gains,
-    GraspPlan,
     contact_force,
     damped_qdd,
     follow_qdd,
     min_jerk,
     object_wrench,
+    plan_for,
     push_torque,
     strict_hold,
 )
@@ -48,11 +48,26 @@ class Slide:
             return f"finger {i} is not in contact"
         face = c.posture.faces[i]
         self.n_O, self.along_O = face_axes(face)
+        # the geometric checks first: they cost microseconds, the force plans milliseconds
+        R = rotation(obs.pose[2])
+        tip_O = R.T @ (model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2])
+        self.c0 = model.shape.coord_of(face, tip_O)  # the contact point's coordinate too
+        self.c1 = self.c0 + self.dc
+        limit = model.shape.half_extent(face) - model.tip_radius
+        if abs(self.c1) > limit:
+            return f"finger {i} would slide past the end of its face ({self.c1:+.3f} m)"
+        self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
+        surface, _ = model.shape.local_contact(face, self.c1)
+        end = obs.pose[:2] + R @ (surface - model.tip_radius * self.n_O)
+        q_end = model.fingers[i].ik(end, self.elbow)
+        if q_end is None:
+            return f"finger {i} cannot reach the end of the slide"
+        if abs(np.sin(q_end[1])) < self.min_bend:
+            return f"finger {i} would end the slide stretched nearly straight"
         t_O = np.array([-self.n_O[1], self.n_O[0]])
         drag = model.mu * float(np.sign(self.dc) * (self.along_O @ t_O))
-        self.plan = GraspPlan.from_state(model, c, obs.pose, obs.q, self.gains, sliding=i,
-                                         drag=drag)
-        self.rest = GraspPlan.from_state(model, c, obs.pose, obs.q, self.gains, sliding=i)
+        self.plan = plan_for(model, c, obs, self.gains, sliding=i, drag=drag)
+        self.rest = plan_for(model, c, obs, self.gains, sliding=i)
         _, w_O = object_wrench(model, self.gains, obs.pose, np.zeros(3),
                                (obs.pose, np.zeros(3), np.zeros(3)))
         lam = self.plan.squeeze.solve(w_O)
@@ -62,22 +77,9 @@ class Slide:
         if lam[2 * k] > self.max_push:
             return (f"finger {i} would have to press with {lam[2 * k]:.2f} N to slide: its "
                     f"friction would drag the object")
-        self.c0 = model.shape.coord_of(face, self.plan.levers_O[k])
-        self.c1 = self.c0 + self.dc
-        limit = model.shape.half_extent(face) - model.tip_radius
-        if abs(self.c1) > limit:
-            return f"finger {i} would slide past the end of its face ({self.c1:+.3f} m)"
         if not strict_hold(model, c.moved(i, coord=self.c1), self.gains):
             return f"the grasp after the slide of finger {i} cannot hold the object"
         self.origin = obs.pose.copy()
-        self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
-        surface, _ = model.shape.local_contact(face, self.c1)
-        end = obs.pose[:2] + rotation(obs.pose[2]) @ (surface - model.tip_radius * self.n_O)
-        q_end = model.fingers[i].ik(end, self.elbow)
-        if q_end is None:
-            return f"finger {i} cannot reach the end of the slide"
-        if abs(np.sin(q_end[1])) < self.min_bend:
-            return f"finger {i} would end the slide stretched nearly straight"
         return None
 
     def achieved(self, obs, tol_m: float = 0.003) -> str | None:

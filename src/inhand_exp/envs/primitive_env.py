@@ -46,7 +46,8 @@ class PrimitiveEnv(EnvBase):
     """Mid-level environment over one simulated world (batch size ``()``).
 
     ``goals`` fixes the episodes' (X0, Xg) pairs, taken in order (evaluation); without it each
-    reset draws a fresh pair of the ``goals`` group from the training distribution.
+    reset draws a fresh pair from the training distribution of the ``goals`` group, or of a
+    group drawn uniformly from ``goals.train_groups`` when that lists any.
     ``states_hz`` > 0 records ``/sim/state`` snapshots at that rate of simulated time.
     """
 
@@ -63,7 +64,8 @@ class PrimitiveEnv(EnvBase):
                                 obj.width_m * p.width_scale, obj.depth_m,
                                 obj.mass_kg * p.mass_scale, obj.friction)
         self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
-        self.prim, self.group = cfg.primitives, cfg.goals.name
+        self.prim = cfg.primitives
+        self.groups = tuple(cfg.goals.train_groups) or (cfg.goals.name,)
         self.gains, self.rules = Gains.from_config(cfg.primitives), Rules.from_config(cfg.task)
         self.filter = str(cfg.task.filter.value if hasattr(cfg.task.filter, "value")
                           else cfg.task.filter)
@@ -129,7 +131,9 @@ class PrimitiveEnv(EnvBase):
         if self.goals is not None:
             pair = self.goals[self.episode % len(self.goals)]
         else:
-            pair = sample_pair(self.model, self.group, self.rng)
+            group = self.groups[int(self.rng.integers(len(self.groups)))] \
+                if len(self.groups) > 1 else self.groups[0]
+            pair = sample_pair(self.model, group, self.rng)
         self.episode += 1
         self.pair, self.goal, self.contacts = pair, pair.xg.copy(), pair.contacts
         self.postures = {pair.contacts.posture}  # reached so far in this episode

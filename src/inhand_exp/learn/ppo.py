@@ -22,7 +22,7 @@ from torchrl.modules import MLP, MaskedCategorical, ProbabilisticActor, ValueOpe
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from inhand_exp.learn.features import ObservationFeatures
+from inhand_exp.learn.features import HandGeometry, ObservationFeatures
 
 Progress = Callable[[int, dict[str, float]], None]
 
@@ -55,28 +55,46 @@ class PPOParams:
                    learner.max_grad_norm)
 
 
-def make_networks(obs_dim: int, n_actions: int, hidden: tuple[int, ...]
-                  ) -> tuple[ProbabilisticActor, ValueOperator]:
-    """Masked categorical policy and value critic over ``observation`` (see ``features``)."""
+class FeatureMLP(nn.Module):
+    """``ObservationFeatures`` followed by an MLP with tanh activations."""
 
-    def mlp(out: int) -> nn.Module:
-        features = ObservationFeatures(obs_dim)
-        return nn.Sequential(features, MLP(in_features=features.out_features, out_features=out,
-                                           num_cells=list(hidden), activation_class=nn.Tanh))
+    def __init__(self, features: ObservationFeatures, out: int, hidden: tuple[int, ...]):
+        super().__init__()
+        self.features = features
+        self.mlp = MLP(in_features=features.out_features, out_features=out,
+                       num_cells=list(hidden), activation_class=nn.Tanh)
 
-    logits = TensorDictModule(mlp(n_actions), in_keys=["observation"], out_keys=["logits"])
+    def forward(self, obs: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        return self.mlp(self.features(obs, mask))
+
+
+def make_networks(obs_dim: int, n_actions: int, hidden: tuple[int, ...],
+                  hand: HandGeometry | None = None) -> tuple[ProbabilisticActor, ValueOperator]:
+    """Masked categorical policy and value critic over ``observation`` (see ``features``).
+
+    With ``hand`` both networks also see the fingertips on the object and the action mask.
+    """
+    keys = ["observation"] if hand is None else ["observation", "action_mask"]
+
+    def net(out: int) -> nn.Module:
+        features = ObservationFeatures(obs_dim, hand, 0 if hand is None else n_actions)
+        return FeatureMLP(features, out, hidden)
+
+    logits = TensorDictModule(net(n_actions), in_keys=keys, out_keys=["logits"])
     actor = ProbabilisticActor(logits, in_keys={"logits": "logits", "mask": "action_mask"},
                                distribution_class=MaskedCategorical, return_log_prob=True)
-    critic = ValueOperator(mlp(1), in_keys=["observation"])
+    critic = ValueOperator(net(1), in_keys=keys)
     return actor, critic
 
 
 class PPO:
     """Networks, loss and optimiser; ``train`` runs the collector loop, ``state_dict`` resumes."""
 
-    def __init__(self, obs_dim: int, n_actions: int, params: PPOParams):
+    def __init__(self, obs_dim: int, n_actions: int, params: PPOParams,
+                 hand: HandGeometry | None = None):
         self.params, self.obs_dim, self.n_actions = params, obs_dim, n_actions
-        self.actor, self.critic = make_networks(obs_dim, n_actions, params.hidden)
+        self.grasp_features = hand is not None
+        self.actor, self.critic = make_networks(obs_dim, n_actions, params.hidden, hand)
         self.advantage = GAE(gamma=params.gamma, lmbda=params.gae_lambda,
                              value_network=self.critic)
         self.loss = ClipPPOLoss(self.actor, self.critic, clip_epsilon=params.clip_epsilon,
@@ -139,6 +157,7 @@ class PPO:
         return {"actor": self.actor.state_dict(), "critic": self.critic.state_dict(),
                 "optim": self.optim.state_dict(), "iteration": self.iteration,
                 "frames": self.frames, "obs_dim": self.obs_dim, "n_actions": self.n_actions,
+                "grasp_features": self.grasp_features,
                 "torch_rng": torch.get_rng_state()}
 
     def save(self, path: Path) -> None:
@@ -157,6 +176,11 @@ class PPO:
                 f"checkpoint {path} is for {state['obs_dim']} observations and "
                 f"{state['n_actions']} actions; this configuration has {self.obs_dim} and "
                 f"{self.n_actions}")
+        saved = bool(state.get("grasp_features", False))
+        if saved != self.grasp_features:
+            raise CheckpointError(
+                f"checkpoint {path} was trained with learner.grasp_features={saved}; this "
+                f"configuration has learner.grasp_features={self.grasp_features}")
         self.actor.load_state_dict(state["actor"])
         self.critic.load_state_dict(state["critic"])
         self.optim.load_state_dict(state["optim"])

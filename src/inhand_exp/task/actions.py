@@ -8,6 +8,7 @@ Each action becomes a fresh primitive for the current contact configuration; a p
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,8 +75,10 @@ def feasibility(actions: tuple[Action, ...], model: HandModel, contacts: Contact
     """Which actions the filter allows in ``obs``, and the primitives already planned for them.
 
     An action is feasible when its primitive's ``start`` accepts the observed state; the
-    planned primitive is returned so that carrying the action out needs no second plan.
+    planned primitive is returned so that carrying the action out needs no second plan. The
+    primitives share the grasp plans they make of the same contacts (``Observation.plans``).
     """
+    obs = dataclasses.replace(obs, plans={})
     mask = np.zeros(len(actions), dtype=bool)
     planned: list = [None] * len(actions)
     for a in actions:

@@ -112,35 +112,41 @@ def save_goals(pairs: list[GoalPair], path: str | Path) -> Path:
 
 
 def load_goals(path: str | Path) -> list[GoalPair]:
-    """Read a goal CSV written by ``save_goals`` or by hand; errors name the row and column."""
+    """Read a goal set, CSV (as ``save_goals`` writes) or Parquet with the same columns; errors
+    name the row and column."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"goal file {path} not found")
-    if path.suffix.lower() != ".csv":
-        raise GoalsError(f"{path}: goal files are CSV (got {path.suffix!r})")
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet"):
+        raise GoalsError(f"{path}: goal files are CSV or Parquet (got {path.suffix!r})")
     try:
-        df = pd.read_csv(path)
+        df = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise GoalsError(f"{path}: not a readable CSV ({err})") from None
+    except (OSError, ValueError) as err:  # pyarrow's errors derive from these
+        raise GoalsError(f"{path}: not a readable Parquet file ({err})") from None
     missing = [c for c in COLUMNS if c not in df.columns]
     if missing:
         raise GoalsError(f"{path}: missing column(s) {', '.join(missing)}")
     pairs = []
     faces_by_name = {f.name.lower(): f for f in Face}
-    for row, r in enumerate(df.itertuples(index=False), start=2):  # line 1 is the header
+    first = 2 if suffix == ".csv" else 1  # a CSV's line 1 is the header
+    where = "line" if suffix == ".csv" else "row"
+    for row, r in enumerate(df.itertuples(index=False), start=first):
         try:
             values = [float(getattr(r, c)) for c in COLUMNS if c not in ("group", "faces")]
         except (TypeError, ValueError) as err:
-            raise GoalsError(f"{path} line {row}: a pose or contact is not a number ({err})") \
+            raise GoalsError(f"{path} {where} {row}: a pose or contact is not a number ({err})") \
                 from None
         if not all(np.isfinite(values)):
-            raise GoalsError(f"{path} line {row}: non-finite pose or contact value")
+            raise GoalsError(f"{path} {where} {row}: non-finite pose or contact value")
         if r.group not in GROUPS:
-            raise GoalsError(f"{path} line {row}: group must be one of {GROUPS}, "
+            raise GoalsError(f"{path} {where} {row}: group must be one of {GROUPS}, "
                              f"got {r.group!r}")
         names = str(r.faces).split("/")
         if len(names) != 3 or any(n not in faces_by_name for n in names):
-            raise GoalsError(f"{path} line {row}: faces must be three of "
+            raise GoalsError(f"{path} {where} {row}: faces must be three of "
                              f"{sorted(faces_by_name)} joined by '/', got {r.faces!r}")
         posture = Posture(tuple(faces_by_name[n] for n in names))
         pairs.append(GoalPair(r.group, np.array(values[0:3]), np.array(values[3:6]),

@@ -113,7 +113,7 @@ def _evaluate(cfg, ppo: PPO, names: list[str], run_dir: Path, log: RunLog, say
     torch.manual_seed(derived_seed(cfg.seed, 2))  # eval.sample draws from torch's generator
     env = batched_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
                       num_envs=min(cfg.train.num_envs, len(goals)),
-                      states_hz=cfg.log.sim_state_hz)
+                      states_hz=cfg.log.sim_state_hz, once=True)
     try:
         summary = evaluate(env, ppo.actor, goals, on_episode=on_episode,
                            on_action=lambda r: log.write("/episode/action", r),

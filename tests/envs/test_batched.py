@@ -60,16 +60,17 @@ def test_serial_and_parallel_evaluations_are_identical(compose_cfg):
     torch.manual_seed(0)
     actor, _ = make_networks(18, 14, (32,))
     runs = {}
-    for backend in ("serial", "parallel"):
+    for backend, once in (("serial", True), ("parallel", True), ("serial", False)):
         cfg.train.backend = backend
-        env = batched_env(cfg, seed=11, goals=goals, states_hz=10.0)
+        env = batched_env(cfg, seed=11, goals=goals, states_hz=10.0, once=once)
         episodes, actions, states = [], [], []
         summary = evaluate(env, actor, goals, episodes.append, actions.append, states.append)
         env.close()
-        runs[backend] = summary, episodes, actions, states
-    serial, parallel = runs["serial"], runs["parallel"]
+        runs[backend, once] = summary, episodes, actions, states
+    serial, parallel = runs["serial", True], runs["parallel", True]
     np.testing.assert_equal(serial[0], parallel[0])  # NaN mean time when nothing succeeds
     assert serial[1:] == parallel[1:]
+    assert runs["serial", False][1:] == serial[1:]  # idling after the last goal changes nothing
     summary, episodes, actions, states = serial
     assert sorted(e["episode"] for e in episodes) == list(range(5))
     for e in episodes:  # episode k plays goal k

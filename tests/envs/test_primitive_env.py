@@ -115,3 +115,20 @@ def test_training_episodes_mix_the_listed_groups(compose_cfg):
         groups.add(mixed.pair.group)
         own.add(plain.pair.group)
     assert groups == {"medium", "hard"} and own == {"easy"}
+
+
+def test_once_idles_after_the_last_goal(compose_cfg):
+    env = PrimitiveEnv(compose_cfg("task.max_actions=2"), goals=one_pair(0.05), seed=0,
+                       once=True)
+    td = env.reset()
+    for _ in range(2):
+        td["action"] = torch.tensor(0)  # repose +x: allowed here
+        td = env.step(td)["next"]
+    assert bool(td["done"]) and env.world.time_s > 0
+    clock = env.world.time_s
+    td = env.reset()
+    assert env.idle and not bool(td["done"])
+    td["action"] = torch.tensor(0)
+    out = env.step(td)["next"]
+    assert bool(out["done"]) and float(out["reward"]) == 0.0 and not bool(out["terminated"])
+    assert env.world.time_s == clock  # nothing simulated

@@ -20,13 +20,13 @@ from inhand_exp.task.goals import GoalPair
 
 
 def _make_env(cfg: dict, goals: list[GoalPair] | None = None,
-              states_hz: float = 0.0) -> PrimitiveEnv:
-    return PrimitiveEnv(OmegaConf.create(cfg), goals=goals, states_hz=states_hz)
+              states_hz: float = 0.0, once: bool = False) -> PrimitiveEnv:
+    return PrimitiveEnv(OmegaConf.create(cfg), goals=goals, states_hz=states_hz, once=once)
 
 
 def _make_row(cfg: dict, goals: list[list[GoalPair]] | None, per: int,
-              states_hz: float) -> SerialEnv:
-    kwargs = [{"cfg": cfg, "states_hz": states_hz,
+              states_hz: float, once: bool = False) -> SerialEnv:
+    kwargs = [{"cfg": cfg, "states_hz": states_hz, "once": once,
                "goals": None if goals is None else goals[j]} for j in range(per)]
     return SerialEnv(per, _make_env, create_env_kwargs=kwargs)
 
@@ -58,11 +58,13 @@ def split_goals(goals: list[GoalPair], n: int) -> list[list[GoalPair]]:
 
 
 def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
-                num_envs: int | None = None, states_hz: float = 0.0) -> EnvBase:
+                num_envs: int | None = None, states_hz: float = 0.0,
+                once: bool = False) -> EnvBase:
     """The batched primitive environment for ``cfg`` (``train.backend``), seeded with ``seed``.
 
     ``goals``: a fixed goal set, dealt round-robin over the environments (see ``split_goals``);
-    without it every episode draws a training pair.
+    without it every episode draws a training pair. ``once``: each environment idles after its
+    share of the goals (evaluation).
     """
     workers, per = layout(cfg, num_envs)
     plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
@@ -70,8 +72,8 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
     if goals is not None:
         dealt = split_goals(goals, workers * per)
         rows = [dealt[w * per:(w + 1) * per] for w in range(workers)]
-    kwargs = [{"cfg": plain, "goals": rows[w], "per": per, "states_hz": states_hz}
-              for w in range(workers)]
+    kwargs = [{"cfg": plain, "goals": rows[w], "per": per, "states_hz": states_hz,
+               "once": once} for w in range(workers)]
     backend = str(getattr(cfg.train.backend, "value", cfg.train.backend))
     if backend == "serial":
         env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)

@@ -49,10 +49,13 @@ class PrimitiveEnv(EnvBase):
     reset draws a fresh pair from the training distribution of the ``goals`` group, or of a
     group drawn uniformly from ``goals.train_groups`` when that lists any.
     ``states_hz`` > 0 records ``/sim/state`` snapshots at that rate of simulated time.
+    ``once``: play each of ``goals`` once, then idle: a reset or a step after the last episode
+    simulates nothing and returns the last observation, the step with ``done`` set (an
+    evaluation whose other environments are still playing wastes no time on this one).
     """
 
     def __init__(self, cfg: DictConfig, goals: list[GoalPair] | None = None,
-                 seed: int | None = None, states_hz: float = 0.0):
+                 seed: int | None = None, states_hz: float = 0.0, once: bool = False):
         super().__init__(device="cpu", batch_size=torch.Size([]))
         obj = _object_config(cfg.object)
         p = cfg.perturb
@@ -72,6 +75,7 @@ class PrimitiveEnv(EnvBase):
         self.noise = np.array([cfg.noise.xz_m, cfg.noise.xz_m, cfg.noise.theta_rad])
         self.actions = action_table(cfg.primitives)
         self.goals, self.episode = goals, 0
+        self.once, self.idle, self.last = once and goals is not None, False, None
         self.snapshots = None
         if states_hz > 0:
             longest = max(v for k, v in cfg.primitives.items() if k.endswith("_duration_s"))
@@ -123,11 +127,22 @@ class PrimitiveEnv(EnvBase):
             **flags}, batch_size=())
         if self.snapshots is not None:
             td["states"] = torch.from_numpy(self.snapshots.table())
+        self.last = td
+        return td
+
+    def _idle_output(self, done: bool) -> TensorDict:
+        td = self.last.clone()
+        for key in ("done", "truncated"):
+            td[key] = torch.tensor([done])
+        td["terminated"] = torch.tensor([False])
         return td
 
     # --- episodes -----------------------------------------------------------------------
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDict:
+        if self.once and self.episode >= len(self.goals):
+            self.idle = True
+            return self._idle_output(done=False)
         if self.goals is not None:
             pair = self.goals[self.episode % len(self.goals)]
         else:
@@ -146,6 +161,10 @@ class PrimitiveEnv(EnvBase):
         return self._output(True, "none", done=false, terminated=false, truncated=false)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDict:
+        if self.idle:
+            td = self._idle_output(done=True)
+            td["reward"] = torch.zeros(1)
+            return td
         a = int(tensordict["action"])
         action = self.actions[a]
         before = to_go(self.pose, self.goal, self.rules)  # as observed at the last output

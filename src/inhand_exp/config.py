@@ -213,7 +213,8 @@ class TrainConfig:
 class EvalConfig:
     episodes: int = spec(50, "Episodes per goal group (the paper: 500).", gt=0)
     goals_file: str | None = spec(None, "CSV/Parquet goal set to evaluate on instead.")
-    sample: bool = spec(False, "Sample the policy's actions instead of taking the most likely.")
+    sample: bool = spec(True, "Draw each action from the policy, as it was trained (seeded from "
+                        "seed); false: take its most likely action, which can cycle.")
 
 
 @dataclass

@@ -146,8 +146,9 @@ def table(summary: dict[str, float], cfg) -> str:
             return "-"
         return format(float(paper[key]), fmt)
 
+    how = "sampled" if cfg.eval.sample else "most likely"
     head = f"{cfg.learner.name} {cfg.goals.name} {cfg.object.name} perturb={cfg.perturb.name} " \
-           f"noise={cfg.noise.name}, {summary['episodes']} episodes"
+           f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions"
     return "\n".join([
         head,
         f"{'':14s}{'ours':>10s}{'paper':>10s}",

@@ -64,7 +64,9 @@ def test_serial_and_parallel_evaluations_are_identical(compose_cfg):
         cfg.train.backend = backend
         env = batched_env(cfg, seed=11, goals=goals, states_hz=10.0, once=once)
         episodes, actions, states = [], [], []
-        summary = evaluate(env, actor, goals, episodes.append, actions.append, states.append)
+        torch.manual_seed(5)  # the sampled actions are drawn in this process
+        summary = evaluate(env, actor, goals, episodes.append, actions.append, states.append,
+                           sample=True)
         env.close()
         runs[backend, once] = summary, episodes, actions, states
     serial, parallel = runs["serial", True], runs["parallel", True]

@@ -32,7 +32,10 @@ def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
              on_state: Sink | None = None, action_names: Sequence[str] | None = None,
              sample: bool = False) -> dict[str, float]:
     """Play every pair of ``goals`` once with the policy's most likely actions (``sample``:
-    actions drawn from it, with torch's global generator); summarise."""
+    actions drawn from it, with torch's global generator); summarise.
+
+    The batch runs in this process's policy call, so the draws do not depend on the backend.
+    """
     n = max(1, env.batch_size.numel())
     need = np.array([len(goals[i::n]) for i in range(n)])
     played = np.zeros(n, dtype=int)  # finished episodes of each environment

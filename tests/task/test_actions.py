@@ -70,6 +70,13 @@ def test_bend_grasp_mask(pole_setup):
     assert mask[kinds == "repose"].all()  # small reposes of a centred grasp are all reachable
     assert not mask[kinds == "flip"].any()  # fingers 1 and 2 (or 0 and 1) cannot hold alone
     assert all((p is not None) == m for p, m in zip(planned, mask, strict=True))
+    reposes = [p for p, a in zip(planned, actions, strict=True) if a.kind == "repose"]
+    assert all(p.plan is reposes[0].plan for p in reposes)  # one force plan for the six
+    slides = {(a.finger, a.dc): p for p, a in zip(planned, actions, strict=True)
+              if a.kind == "slide" and p is not None}
+    for (finger, dc), p in slides.items():  # both directions rest on one plan
+        other = slides.get((finger, -dc))
+        assert other is None or (other.rest is p.rest and other.plan is not p.plan)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -24,6 +24,8 @@ import numpy as np
 
 from inhand_exp.control.lp import SmallLP, linprog
 
+MARGIN = 1e-9  # least slack (N per N of total squeeze) of a strict squeeze
+
 
 def _cone_rows(k: int, mu: float) -> np.ndarray:
     """Rows ``A`` with ``A lam <= 0`` meaning ``|f_t| <= mu f_n`` for each of ``k`` contacts."""
@@ -40,6 +42,41 @@ def solve_lp(G: np.ndarray, w: np.ndarray, mu: float, f_min: float,
     k = G.shape[1] // 2
     return linprog(np.tile([1.0, 0.0], k), G, w, _cone_rows(k, mu), np.zeros(2 * k),
                    np.tile([f_min, -np.inf], k), np.tile([f_max, np.inf], k))
+
+
+def _deepest_squeeze(Gr: np.ndarray, fn: np.ndarray, fric: np.ndarray, mu: float
+                     ) -> tuple[np.ndarray, float]:
+    """The internal force (``Gr lam0 = 0``, sum f_n = 1) deepest inside the cones, and its
+    least slack: maximise s with f_n >= s and mu f_n -+ f_t >= s (one LP)."""
+    m = Gr.shape[1]
+    rows = []
+    for a, b in fric:
+        for sign in (1.0, -1.0):
+            r = np.zeros(m + 1)
+            r[a], r[b], r[m] = -mu, sign, 1.0
+            rows.append(r)
+    for a in fn:
+        r = np.zeros(m + 1)
+        r[a], r[m] = -1.0, 1.0
+        rows.append(r)
+    A_eq = np.zeros((4, m + 1))
+    A_eq[:3, :m] = Gr
+    A_eq[3, fn] = 1.0
+    cost = np.zeros(m + 1)
+    cost[m] = -1.0
+    upper = np.full(m + 1, np.inf)
+    upper[m] = 1.0
+    x = linprog(cost, A_eq, np.array([0.0, 0.0, 0.0, 1.0]), np.array(rows),
+                np.zeros(len(rows)), np.full(m + 1, -np.inf), upper)
+    return (x[:m], float(x[m])) if x is not None else (np.zeros(m), 0.0)
+
+
+def has_strict_squeeze(G: np.ndarray, mu: float) -> bool:
+    """True when an internal force lies strictly inside every friction cone (what
+    ``Squeeze.build(G, mu, ...).usable`` says, without building the rest of the plan)."""
+    k = G.shape[1] // 2
+    _, margin = _deepest_squeeze(G, np.arange(0, 2 * k, 2), np.arange(2 * k).reshape(-1, 2), mu)
+    return margin > MARGIN
 
 
 @dataclass(frozen=True)
@@ -87,28 +124,8 @@ class Squeeze:
         Gr = G[:, cols].copy()
         for i, c in coupled.items():
             Gr[:, pos[2 * i]] += c * G[:, 2 * i + 1]
+        lam0, margin = _deepest_squeeze(Gr, fn, fric, mu)
         m = len(cols)
-        # variables (lam0, s): maximise s with f_n >= s, mu f_n -+ f_t >= s, G lam0 = 0.
-        rows = []
-        for a, b in fric:
-            for sign in (1.0, -1.0):
-                r = np.zeros(m + 1)
-                r[a], r[b], r[m] = -mu, sign, 1.0
-                rows.append(r)
-        for a in fn:
-            r = np.zeros(m + 1)
-            r[a], r[m] = -1.0, 1.0
-            rows.append(r)
-        A_eq = np.zeros((4, m + 1))
-        A_eq[:3, :m] = Gr
-        A_eq[3, fn] = 1.0
-        cost = np.zeros(m + 1)
-        cost[m] = -1.0
-        upper = np.full(m + 1, np.inf)
-        upper[m] = 1.0
-        x = linprog(cost, A_eq, np.array([0.0, 0.0, 0.0, 1.0]), np.array(rows),
-                    np.zeros(len(rows)), np.full(m + 1, -np.inf), upper)
-        lam0, margin = (x[:m], float(x[m])) if x is not None else (np.zeros(m), 0.0)
         cost = None
         if light:
             cost = np.zeros(m)
@@ -116,7 +133,7 @@ class Squeeze:
             cost[[pos[2 * i] for i in light]] = 10.0
         pinv = np.linalg.pinv(Gr)
         fast = None
-        if margin > 1e-9:
+        if margin > MARGIN:
             # constraints g(lam) >= bound, g linear: f_n >= f_min and mu f_n -+ f_t >= 0, so
             # alpha >= (bound - g(lam_p)) / g(lam0) for each; every g(lam0) >= margin > 0
             rows = [(f_min, (1.0, fn_i, 0.0, fn_i), lam0[fn_i]) for fn_i in fn]
@@ -131,7 +148,7 @@ class Squeeze:
     @property
     def usable(self) -> bool:
         """True when a strict internal squeeze exists: every wrench is then a closed form."""
-        return self.margin > 1e-9
+        return self.margin > MARGIN
 
     def solve(self, w: np.ndarray) -> np.ndarray | None:
         """Forces ``lam`` (2k,) balancing wrench ``w`` (same frame as ``G``), or None."""

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from inhand_exp.control.finger import FingerTerms
-from inhand_exp.control.forces import Squeeze
+from inhand_exp.control.forces import Squeeze, has_strict_squeeze
 from inhand_exp.control.grasp import Contacts, contact_frames, grasp_matrix, rotation
 from inhand_exp.control.hand import HandModel
 
@@ -103,8 +103,7 @@ def strict_hold(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
     the friction cones: the grasp holds whatever the small wrenches a controller asks for."""
     act = [i for i in range(3) if contacts.active[i]]
     pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
-    G = grasp_matrix(pts[act], nrm[act])
-    return Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min, gains.f_max).usable
+    return has_strict_squeeze(grasp_matrix(pts[act], nrm[act]), model.mu * gains.friction_margin)
 
 
 def min_jerk(start: np.ndarray, goal: np.ndarray, duration: float, t: float

@@ -202,3 +202,37 @@ def test_wrench_beyond_f_max_is_infeasible(w):
     lam = Squeeze.build(G, MU, F_MIN).solve(w)
     assert lam is not None
     _check_lam(G, lam, w, f_max=np.inf)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_landing_span_bounds_every_strict_hold(seed):
+    """Wherever a finger moved to the other face admits a strict squeeze, its coordinate lies
+    inside ``landing_span``; just outside the span none does."""
+    from inhand_exp.control.flip import OPPOSITE
+    from inhand_exp.control.repose import landing_span, strict_hold
+    from inhand_exp.control.sample import random_grasp
+
+    model = HandModel.from_config(HandConfig(), ObjectConfig(), SimConfig().gravity_mps2)
+    rng = np.random.default_rng(seed)
+    _, contacts, _ = random_grasp(model, rng)
+    grid = np.linspace(-0.24, 0.24, 97)
+    spans = 0
+    for finger in range(3):
+        face = OPPOSITE[contacts.posture.faces[finger]]
+        span = landing_span(model, contacts, finger, face, Gains())
+        held = [c for c in grid
+                if strict_hold(model, contacts.moved(finger, coord=float(c), face=face), Gains())]
+        if span is None:
+            assert held == []
+            continue
+        spans += 1
+        lo, hi = span
+        assert all(lo - 1e-6 <= c <= hi + 1e-6 for c in held), (finger, span, held)
+        for c in (lo - 1e-3, hi + 1e-3):
+            if abs(c) < 0.25:
+                assert not strict_hold(model, contacts.moved(finger, coord=c, face=face),
+                                       Gains())
+        if hi - lo > 0.02:  # well inside a wide span the grasp holds
+            assert strict_hold(model, contacts.moved(finger, coord=(lo + hi) / 2, face=face),
+                               Gains())
+    assert spans >= 1

@@ -326,3 +326,25 @@ def test_short_fingers_rejected_at_build_time():
 def test_grasp_out_of_reach_names_the_finger(nominal_model):
     with pytest.raises(GeometryError, match=r"finger \d cannot reach"):
         nominal_model.grasp_q(BEND, np.array([0.0, 2.0, 0.0]))
+
+
+@pytest.mark.parametrize("finger", [0, 2])
+@pytest.mark.parametrize("shift", [0.0, 0.02, -0.03])
+def test_flip_landing_is_the_same_without_the_span_pruning(nominal_model, make_world,
+                                                          monkeypatch, finger, shift):
+    """``landing_span`` only skips landing places that cannot hold: the flip plans the same."""
+    import inhand_exp.control.flip as flip_module
+    from inhand_exp.control.execute import Observation
+
+    base = FLIP_SETUPS[finger]
+    contacts = base.moved(finger, coord=base.coords[finger] + shift)
+    world = make_world(contacts, X0)
+    pose, twist = world.object_state()
+    q, qd = world.joint_state()
+    obs = Observation(q, qd, pose, twist, 0.0)
+    pruned = Flip(nominal_model, contacts, finger, FLIP_S)
+    why = pruned.start(obs)
+    monkeypatch.setattr(flip_module, "landing_span", lambda *a: (-math.inf, math.inf))
+    full = Flip(nominal_model, contacts, finger, FLIP_S)
+    assert full.start(obs) == why
+    assert why is None and pruned.coord == full.coord

@@ -25,6 +25,7 @@ from inhand_exp.control.repose import (
     Gains,
     GraspPlan,
     follow_qdd,
+    landing_span,
     object_wrench,
     plan_for,
     push_torque,
@@ -33,6 +34,7 @@ from inhand_exp.control.repose import (
 
 OPPOSITE = {Face.TOP: Face.BOTTOM, Face.BOTTOM: Face.TOP,
             Face.LEFT: Face.RIGHT, Face.RIGHT: Face.LEFT}
+SPAN_TOL_M = 1e-6  # slack on landing_span's bounds (LP tolerance): they only prune the search
 PHASES = {"unload": 0.12, "travel": 0.55, "touch": 0.1, "load": 0.1}  # the rest settles
 
 
@@ -145,13 +147,17 @@ class Flip:
         here = self.contacts.coords[i]
         n = int((model.shape.half_extent(new_face) - 2 * model.tip_radius) // step_m)
         R = rotation(obs.pose[2])
+        span = landing_span(model, self.contacts, i, new_face, self.gains)
+        if span is None:
+            return None
+        lo, hi = span[0] - SPAN_TOL_M, span[1] + SPAN_TOL_M
         for coord in sorted((k * step_m for k in range(-n, n + 1)), key=lambda c: abs(c - here)):
-            if not strict_hold(model, self.contacts.moved(i, coord=coord, face=new_face),
-                               self.gains):
+            if not lo <= coord <= hi:
                 continue
             tracker = PathTracker(self._path(tip_O, face, coord), self.times["travel"][0],
                                   self.times["touch"][1])
-            if tracker.reachable(model, i, self.elbow, obs.pose, R):
+            if tracker.reachable(model, i, self.elbow, obs.pose, R) and strict_hold(
+                    model, self.contacts.moved(i, coord=coord, face=new_face), self.gains):
                 return coord, tracker
         return None
 

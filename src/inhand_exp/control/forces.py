@@ -79,6 +79,33 @@ def has_strict_squeeze(G: np.ndarray, mu: float) -> bool:
     return margin > MARGIN
 
 
+def strict_span(G0: np.ndarray, col: int, k: float, mu: float, bound: float
+                ) -> tuple[float, float] | None:
+    """Where along its face one contact may sit for a strict squeeze to be possible.
+
+    The contact whose normal force is column ``col`` of ``G0`` moves along a straight face: at
+    coordinate ``c`` the grasp matrix is ``G0`` with ``c k`` added to that column's moment entry
+    (``k``: the face direction crossed with the normal). A strict squeeze at ``c`` scales to
+    forces inside the closed cones with that normal force 1 and ``G(c) lam = 0``, so
+    ``c = -(G0 lam)_tau / k``, linear in ``lam``: two LPs bound it. Outside ``(lo, hi)`` (both
+    clipped to +-``bound``) no strict squeeze exists; None: none anywhere.
+    """
+    m = G0.shape[1]
+    coord = -G0[2] / k  # c as a function of the forces
+    A_eq = np.vstack([G0[:2], np.eye(m)[col]])
+    b_eq = np.array([0.0, 0.0, 1.0])
+    A_ub = np.vstack([_cone_rows(m // 2, mu), coord, -coord])
+    b_ub = np.concatenate([np.zeros(m), [bound, bound]])
+    lower, upper = np.tile([0.0, -np.inf], m // 2), np.full(m, np.inf)
+    ends = []
+    for sign in (1.0, -1.0):
+        lam = linprog(sign * coord, A_eq, b_eq, A_ub, b_ub, lower, upper)
+        if lam is None:
+            return None
+        ends.append(float(coord @ lam))
+    return ends[0], ends[1]
+
+
 @dataclass(frozen=True)
 class Squeeze:
     """Precomputed distribution for one contact configuration (see module docstring).

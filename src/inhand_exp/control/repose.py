@@ -16,8 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from inhand_exp.control.finger import FingerTerms
-from inhand_exp.control.forces import Squeeze, has_strict_squeeze
-from inhand_exp.control.grasp import Contacts, contact_frames, grasp_matrix, rotation
+from inhand_exp.control.forces import Squeeze, has_strict_squeeze, strict_span
+from inhand_exp.control.grasp import (
+    Contacts,
+    contact_frames,
+    cross2,
+    face_axes,
+    grasp_matrix,
+    rotation,
+)
 from inhand_exp.control.hand import HandModel
 
 
@@ -104,6 +111,20 @@ def strict_hold(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
     act = [i for i in range(3) if contacts.active[i]]
     pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
     return has_strict_squeeze(grasp_matrix(pts[act], nrm[act]), model.mu * gains.friction_margin)
+
+
+def landing_span(model: HandModel, contacts: Contacts, finger: int, face, gains: Gains
+                 ) -> tuple[float, float] | None:
+    """Bounds on the coordinates along ``face`` where ``finger`` can join the other contacts in
+    a grasp that ``strict_hold`` accepts (two LPs, ``forces.strict_span``): a search over
+    landing places can skip everything outside them. None: no place on ``face`` will do."""
+    at0 = contacts.moved(finger, coord=0.0, face=face)
+    act = [i for i in range(3) if at0.active[i]]
+    pts, nrm = contact_frames(model.shape, at0, np.zeros(3))
+    inward, along = face_axes(face)
+    G0 = grasp_matrix(pts[act], nrm[act])
+    return strict_span(G0, 2 * act.index(finger), cross2(along, inward),
+                       model.mu * gains.friction_margin, model.shape.half_extent(face) + 1.0)
 
 
 def min_jerk(start: np.ndarray, goal: np.ndarray, duration: float, t: float

@@ -143,7 +143,7 @@ def table(summary: dict[str, float], cfg) -> str:
 
     def cell(key: str, fmt: str) -> str:
         if paper is None or not paper.get(key):
-            return "-"
+            return f"{'-':>10s}"
         return format(float(paper[key]), fmt)
 
     how = "sampled" if cfg.eval.sample else "most likely"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 import pytest
@@ -82,3 +83,20 @@ def test_serial_and_parallel_evaluations_are_identical(compose_cfg):
     for k in range(5):
         times = [s["sim_time_s"] for s in states if s["episode"] == k]
         assert times[0] == 0.0 and all(np.diff(times) > 0)
+
+
+def test_parallel_main_process_sleeps_while_the_workers_step(compose_cfg):
+    """The main process waits without spinning: it uses little CPU while the workers step
+    (a spinning wait would use all of its wall time and take a core from the workers)."""
+    env = batched_env(compose_cfg(*SMALL, "train.workers=2", "train.backend=parallel"), seed=0)
+    try:
+        td = env.reset()
+        cpu, wall = time.process_time(), time.perf_counter()
+        for _ in range(3):
+            td["action"] = torch.zeros(td.shape, dtype=torch.long)  # repose +x
+            td, root = env.step_and_maybe_reset(td)
+            td = root
+        cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    finally:
+        env.close()
+    assert cpu < 0.3 * wall, (cpu, wall)  # spinning: about 0.7 here

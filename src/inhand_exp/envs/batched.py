@@ -9,6 +9,7 @@ sub-environments get the seeds TorchRL derives from it, in row-major order.
 from __future__ import annotations
 
 import os
+import time
 import warnings
 
 from omegaconf import DictConfig, OmegaConf
@@ -17,6 +18,34 @@ from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 from inhand_exp.config import ConfigError
 from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.task.goals import GoalPair
+
+
+class SleepyParallelEnv(ParallelEnv):
+    """``ParallelEnv`` whose main process sleeps while its workers step.
+
+    TorchRL 0.14 waits for the workers by spinning on shared-memory flags, which keeps a whole
+    core busy; on a 2-core machine that core is taken from the two workers. A mid-level step
+    lasts tens of milliseconds, so polling every ``poll_s`` costs nothing measurable. Once every
+    flag is up (or a worker died, or the time limit passed) TorchRL's own wait takes over: it
+    clears the flags and reports dead workers and timeouts as usual.
+    """
+
+    poll_s = 0.0005
+
+    def _wait_for_workers(self, workers_range):
+        flags = getattr(self, "_shm_done_flags", None)
+        if self._use_buffers and flags is not None:
+            index = self._worker_indices
+            start = last_check = time.monotonic()
+            while not all(flags[index[i]] for i in workers_range):
+                time.sleep(self.poll_s)
+                now = time.monotonic()
+                if now - last_check > 1.0:
+                    last_check = now
+                    if (now - start > self.BATCHED_PIPE_TIMEOUT
+                            or not all(self._workers[i].is_alive() for i in workers_range)):
+                        break
+        return super()._wait_for_workers(workers_range)
 
 
 def _make_env(cfg: dict, goals: list[GoalPair] | None = None,
@@ -78,7 +107,7 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
     if backend == "serial":
         env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)
     else:
-        env = ParallelEnv(workers, _make_row, create_env_kwargs=kwargs,
-                          mp_start_method="spawn")
+        env = SleepyParallelEnv(workers, _make_row, create_env_kwargs=kwargs,
+                                mp_start_method="spawn")
     env.set_seed(seed)
     return env

@@ -1,0 +1,21 @@
+"""The evaluation table printed at the end of a run, beside the paper's numbers."""
+
+from __future__ import annotations
+
+from inhand_exp.experiment import paper_row, table
+
+SUMMARY = {"episodes": 500, "success_rate": 0.952, "drop_rate": 0.012, "timeout_rate": 0.036,
+           "avg_time_s": 5.71}
+
+
+def test_table_sets_ours_beside_the_papers_cells_in_aligned_columns(compose_cfg):
+    full = table(SUMMARY, compose_cfg("goals=hard")).splitlines()
+    assert full[2].split() == ["success", "95.2%", "79.3%"]
+    assert full[3].split() == ["drop", "1.2%", "15.7%"]
+    sparse = table(SUMMARY, compose_cfg("noise=paper")).splitlines()  # Table III: success only
+    assert sparse[2].split() == ["success", "95.2%", "93.2%"]
+    assert sparse[3].split() == ["drop", "1.2%", "-"]
+    assert len({len(line) for line in sparse[1:]}) == 1  # every row as wide as the header
+    assert "sampled actions" in sparse[0]
+    assert paper_row(compose_cfg("object.name=pole", "perturb=heavier")) is not None
+    assert paper_row(compose_cfg("goals=easy", "noise=paper")) is None

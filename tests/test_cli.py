@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from inhand_exp.record import read_log
@@ -119,6 +120,35 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
         assert "Traceback" not in bad.stderr
         if "configuration has" not in message:  # refused before anything was written
             assert not (run_dir / "run.mcap").exists()
+
+
+def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
+    from inhand_exp.config import HandConfig, ObjectConfig
+    from inhand_exp.control.hand import HandModel
+    from inhand_exp.task.goals import goal_set, load_goals
+
+    res = inhand_exp("mode=goals", "goals=hard", "eval.episodes=6",
+                     f"hydra.run.dir={tmp_path / 'set'}", cwd=tmp_path, fast=False)
+    assert res.returncode == 0, res.stderr
+    path = tmp_path / "set" / "goals.csv"
+    assert "6 hard pairs written" in res.stdout and "need a flip" in res.stdout
+    assert not (tmp_path / "set" / "policy.pt").exists()  # no policy involved
+    model = HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
+    back, made = load_goals(path), goal_set(model, "hard", 6, seed=1234)
+    assert [(p.contacts.posture, p.needs_flip) for p in back] == [
+        (p.contacts.posture, p.needs_flip) for p in made]
+    for a, b in zip(back, made, strict=True):
+        np.testing.assert_allclose(np.r_[a.x0, a.xg, a.contacts.coords],
+                                   np.r_[b.x0, b.xg, b.contacts.coords], atol=1e-8)
+    first = inhand_exp("mode=train", f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    ev = inhand_exp("mode=eval", f"checkpoint={tmp_path / 'train' / 'policy.pt'}",
+                    f"eval.goals_file={path}", f"hydra.run.dir={tmp_path / 'ev'}",
+                    "eval.episodes=6", cwd=tmp_path)
+    assert ev.returncode == 0, ev.stderr
+    episodes = read_log(tmp_path / "ev" / "run.mcap").topic("/eval/episode")
+    assert [e["xg"] for e in episodes] == [list(p.xg) for p in back]
+    assert [e["needs_flip"] for e in episodes] == [p.needs_flip for p in back]
 
 
 def test_resume_continues_an_interrupted_training_in_its_run_directory(tmp_path):

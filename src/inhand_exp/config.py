@@ -32,6 +32,7 @@ class Mode(StrEnum):
     train = "train"
     eval = "eval"
     train_eval = "train_eval"
+    goals = "goals"
 
 
 class FilterMode(StrEnum):
@@ -64,7 +65,14 @@ class HandConfig:
     )
     link_masses_kg: list[float] = spec([0.05, 0.05], "Proximal and distal link masses (kg).",
                                        gt=0, length=2)
-    link_radius_m: float = spec(0.008, "Radius of the link capsules (m).", gt=0)
+    link_radius_m: float = spec(0.008, "Radius of the link capsules (m); they collide with the "
+                                "object.", gt=0)
+    link_clearance_m: float = spec(0.002, "Least gap the controllers keep between a link (or "
+                                   "the palm) and the object in every pose they plan (m).", ge=0)
+    palm_thickness_m: float = spec(0.02, "Thickness of the palm plate (m); its top face is at "
+                                   "base_z_m and the object collides with it.", gt=0)
+    palm_overhang_m: float = spec(0.06, "How far the palm plate reaches beyond the outer "
+                                  "finger bases (m).", ge=0)
     tip_radius_m: float = spec(0.012, "Radius of the spherical fingertip (m).", gt=0)
     tip_mass_kg: float = spec(0.01, "Mass of the fingertip sphere (kg).", gt=0)
     friction: float = spec(1.0, "Lateral friction coefficient of the fingertips.", ge=0)
@@ -131,6 +139,10 @@ class GoalsConfig:
     test_pairs: int = spec(500, "Test (X0, Xg) pairs in the group.", gt=0)
     train_pairs: int = spec(20000, "Training pairs, drawn apart from the test set.", gt=0)
     seed: int = spec(1234, "Seed of the dataset, the same for every learner.", ge=0)
+    hard_goal_posture: str = spec("any", "Hard goals are arbitrary poses the hand holds (any, "
+                                  "as the paper says) or poses held by a grasp of another "
+                                  "posture than the start's (other, as the authors' code drew "
+                                  "them).", choices=("any", "other"))
     train_groups: list[str] = spec([], "Groups the training episodes are drawn from, "
                                    "uniformly; empty: this group only.",
                                    choices=("easy", "medium", "hard"))
@@ -197,7 +209,16 @@ class TaskConfig:
                                   "progress towards the goal; 0 is the paper's reward.")
     success_tol_m: float = spec(0.01, "Success tolerance on |dx| and |dz| (m).", gt=0)
     success_tol_rad: float = spec(0.1, "Success tolerance on |dtheta| (rad).", gt=0)
-    max_actions: int = spec(50, "Time limit in mid-level actions.", gt=0)
+    max_actions: int = spec(200, "Time limit in mid-level actions (the authors': 200).", gt=0)
+    workspace_x_m: list[float] = spec([-0.05, 0.05], "Range of object x (m) that start and goal "
+                                      "poses are drawn from (the authors': +-5 cm).", length=2)
+    workspace_z_m: list[float] = spec([0.18, 0.52], "Range of object z (m), the height of its "
+                                      "centre above the palm; the hand holds a band inside it.",
+                                      length=2)
+    workspace_theta_rad: list[float] = spec([-math.pi / 2, math.pi / 2], "Range of the object's "
+                                            "tilt from upright (rad; the authors': +-pi/2). "
+                                            "Every pose is kept only if a grasp holds it.",
+                                            length=2)
 
 
 @dataclass
@@ -242,7 +263,9 @@ class Config:
     eval: EvalConfig = field(default_factory=EvalConfig)
     log: LogConfig = field(default_factory=LogConfig)
     seed: int = spec(0, "Seed of everything random in the run.", ge=0)
-    mode: Mode = spec(Mode.train_eval, "What the run does: train, eval or train_eval.")
+    mode: Mode = spec(Mode.train_eval, "What the run does: train, eval, train_eval, or goals "
+                      "(write the goals group's test set of eval.episodes pairs to goals.csv, "
+                      "no policy involved).")
     checkpoint: str | None = spec(None, "Policy checkpoint to evaluate or to train on from.")
     resume: str | None = spec(None, "Run directory of an interrupted training to continue.")
 
@@ -326,6 +349,10 @@ def _check_consistency(cfg: DictConfig) -> None:
         if not a < b <= a + 2 * math.pi:
             raise ConfigError(f"hand.joint_lower_rad[{i}] < hand.joint_upper_rad[{i}] <= "
                               f"hand.joint_lower_rad[{i}] + 2 pi must hold, got {a}, {b}")
+    for key in ("workspace_x_m", "workspace_z_m", "workspace_theta_rad"):
+        a, b = cfg.task[key]
+        if not a < b:
+            raise ConfigError(f"task.{key} must be [low, high] with low < high, got [{a}, {b}]")
     dt = cfg.sim.timestep_s
     durations = {f"primitives.{k}": cfg.primitives[k]
                  for k in ("repose_duration_s", "slide_duration_s", "flip_duration_s",

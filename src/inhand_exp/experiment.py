@@ -17,6 +17,7 @@ import torch
 from omegaconf import DictConfig
 
 from inhand_exp.control.hand import HandModel
+from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.learn.evaluate import evaluate
@@ -25,7 +26,7 @@ from inhand_exp.learn.ppo import PPO, PPOParams
 from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
 from inhand_exp.task.actions import action_table
-from inhand_exp.task.goals import goal_set, load_goals, save_goals
+from inhand_exp.task.goals import GoalPair, goal_set, load_goals, save_goals
 
 CHECKPOINT = "policy.pt"
 
@@ -43,6 +44,9 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, say: Callable[[str], No
     in all; otherwise a ``checkpoint`` is a starting point for ``train.frames`` more.
     """
     mode = str(getattr(cfg.mode, "value", cfg.mode))
+    if mode == "goals":
+        write_goal_set(cfg, run_dir, say)
+        return None
     actions = action_table(cfg.primitives)
     hand = HandGeometry.from_config(cfg.hand) if cfg.learner.grasp_features else None
     ppo = PPO(OBS_DIM, len(actions), PPOParams.from_config(cfg.learner), hand)
@@ -92,13 +96,30 @@ def _train(cfg, ppo: PPO, target: int, run_dir: Path, log: RunLog, say) -> None:
         f"{time.perf_counter() - start:.0f} s)")
 
 
+def test_goals(cfg) -> list[GoalPair]:
+    """The evaluation's goal set: ``eval.goals_file``, or the first ``eval.episodes`` test
+    pairs of the ``goals`` group."""
+    model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
+    if cfg.eval.goals_file:
+        return load_goals(cfg.eval.goals_file, model)
+    return goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed,
+                    workspace=Workspace.from_config(cfg.task),
+                    hard_posture=cfg.goals.hard_goal_posture)
+
+
+def write_goal_set(cfg, run_dir: Path, say) -> Path:
+    """``mode=goals``: the test set alone, to share or to feed another learner."""
+    goals = test_goals(cfg)
+    path = save_goals(goals, run_dir / "goals.csv")
+    flips = sum(p.needs_flip for p in goals)
+    say(f"{len(goals)} {cfg.goals.name} pairs written to {path}; {flips} "
+        f"({flips / len(goals):.1%}) need a flip")
+    return path
+
+
 def _evaluate(cfg, ppo: PPO, names: list[str], run_dir: Path, log: RunLog, say
               ) -> dict[str, float]:
-    if cfg.eval.goals_file:
-        goals = load_goals(cfg.eval.goals_file)
-    else:
-        model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
-        goals = goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed)
+    goals = test_goals(cfg)
     save_goals(goals, run_dir / "goals.csv")
     labels = {"object": cfg.object.name, "perturb": cfg.perturb.name, "noise": cfg.noise.name,
               "learner": cfg.learner.name, "seed": int(cfg.seed)}
@@ -149,10 +170,16 @@ def table(summary: dict[str, float], cfg) -> str:
     how = "sampled" if cfg.eval.sample else "most likely"
     head = f"{cfg.learner.name} {cfg.goals.name} {cfg.object.name} perturb={cfg.perturb.name} " \
            f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions"
+    flips = []
+    if summary.get("needs_flip"):
+        flips = [f"{'needs a flip':14s}{summary['needs_flip_success_rate']:10.1%}{'-':>10s}"
+                 f"   ({summary['needs_flip']} episodes; drops "
+                 f"{summary['needs_flip_drop_rate']:.1%})"]
     return "\n".join([
         head,
         f"{'':14s}{'ours':>10s}{'paper':>10s}",
         f"{'success':14s}{summary['success_rate']:10.1%}{cell('success_rate', '10.1%')}",
         f"{'drop':14s}{summary['drop_rate']:10.1%}{cell('drop_rate', '10.1%')}",
         f"{'timeout':14s}{summary['timeout_rate']:10.1%}{'-':>10s}",
-        f"{'avg time (s)':14s}{summary['avg_time_s']:10.2f}{cell('avg_time_s', '10.2f')}"])
+        f"{'avg time (s)':14s}{summary['avg_time_s']:10.2f}{cell('avg_time_s', '10.2f')}",
+        *flips])

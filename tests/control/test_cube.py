@@ -94,9 +94,10 @@ def test_release_then_land(cube_model, cube_world, seed):
 
 
 def test_release_needs_an_opposing_pair(cube_model, cube_world):
-    # fingers 1 and 2 both on the bottom face cannot hold the cube without finger 0
+    # fingers 1 and 2 both on the bottom face cannot hold the cube without finger 0; the
+    # cube sits high enough for both to reach under it with their links clear
     contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.BOTTOM)), (0.0, -0.02, 0.02))
-    pose = np.array([0.0, 0.2, 0.0])
+    pose = np.array([0.0, 0.25, 0.0])
     cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
     out = execute(cube_world, Release(cube_model, contacts, 0, 1.0))
     assert out.reason == "infeasible" and out.steps == 0

@@ -11,7 +11,7 @@ from inhand_exp.control.grasp import Contacts, Face, Posture, contact_frames, gr
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import Gains
 
-B, T = Face.BOTTOM, Face.TOP
+L, R = Face.LEFT, Face.RIGHT  # the pole's long sides
 G_ACC = SimConfig().gravity_mps2
 OBJ = ObjectConfig()
 GAINS = Gains()
@@ -19,7 +19,8 @@ MODEL = HandModel.from_config(HandConfig(), OBJ, G_ACC)
 MU = MODEL.mu * GAINS.friction_margin
 F_MIN, F_MAX = GAINS.f_min, GAINS.f_max
 GRAVITY_WRENCH = np.array([0.0, OBJ.mass_kg * G_ACC, 0.0])  # what the contacts must supply
-BEND = Contacts(Posture((B, T, B)), (-0.12, 0.0, 0.12))
+# a three-point bend of the upright pole: finger 1 alone on the right, between the others
+BEND = Contacts(Posture((L, R, L)), (-0.12, 0.0, 0.12))
 
 
 def _g(contacts: Contacts, theta: float = 0.0) -> np.ndarray:
@@ -110,8 +111,9 @@ def test_bend_grasp_large_wrenches_agree_on_infeasibility():
     assert (True, True) in outcomes and (False, False) in outcomes
 
 
-def _both(contacts: Contacts, w: np.ndarray = GRAVITY_WRENCH, f_min: float = F_MIN):
-    G = _g(contacts)
+def _both(contacts: Contacts, w: np.ndarray = GRAVITY_WRENCH, f_min: float = F_MIN,
+          theta: float = 0.0):
+    G = _g(contacts, theta)
     return G, solve_lp(G, w, MU, f_min, F_MAX), Squeeze.build(G, MU, f_min, F_MAX).solve(w)
 
 
@@ -124,14 +126,14 @@ def test_three_point_bend_holds_gravity():
 
 @pytest.mark.parametrize("coords", [(-0.12, 0.0, 0.12), (-0.2, -0.1, 0.2), (-0.12, 0.11, 0.12)])
 def test_lone_finger_between_pair_has_squeeze(coords):
-    _, lam_lp, lam_sq = _both(Contacts(Posture((B, T, B)), coords))
+    _, lam_lp, lam_sq = _both(Contacts(Posture((L, R, L)), coords))
     assert lam_lp is not None and lam_sq is not None
 
 
 @pytest.mark.parametrize("faces, coords", [
-    ((B, B, T), (-0.12, 0.0, 0.12)),
-    ((T, B, B), (-0.12, 0.0, 0.12)),
-    ((T, T, B), (-0.12, 0.0, 0.12)),
+    ((L, L, R), (-0.12, 0.0, 0.12)),
+    ((R, L, L), (-0.12, 0.0, 0.12)),
+    ((R, R, L), (-0.12, 0.0, 0.12)),
 ])
 def test_lone_finger_outside_pair_is_infeasible(faces, coords):
     G, lam_lp, lam_sq = _both(Contacts(Posture(faces), coords))
@@ -140,15 +142,15 @@ def test_lone_finger_outside_pair_is_infeasible(faces, coords):
     assert not Squeeze.build(G, MU, F_MIN, F_MAX).usable
 
 
-def test_all_fingers_on_top_is_infeasible():
-    _, lam_lp, lam_sq = _both(Contacts(Posture((T, T, T)), (-0.12, 0.0, 0.12)))
+def test_all_fingers_on_one_side_is_infeasible():
+    _, lam_lp, lam_sq = _both(Contacts(Posture((R, R, R)), (-0.12, 0.0, 0.12)))
     assert lam_lp is None and lam_sq is None
 
 
 def test_all_fingers_below_only_rests():
-    """Three fingers below can only support: no internal squeeze exists, and balancing
-    gravity needs 3 f_min <= m g."""
-    contacts = Contacts(Posture((B, B, B)), (-0.12, 0.0, 0.12))
+    """Three fingers under the upright pole's lower end can only support it: no internal
+    squeeze exists, and balancing gravity needs 3 f_min <= m g."""
+    contacts = Contacts(Posture((Face.BOTTOM,) * 3), (-0.008, 0.0, 0.008))
     G, lam_lp, lam_sq = _both(contacts)
     assert GRAVITY_WRENCH[1] < 3 * F_MIN
     assert lam_lp is None and lam_sq is None
@@ -166,7 +168,7 @@ def test_all_fingers_below_only_rests():
 
 @pytest.mark.parametrize("coord", [0.0, 0.01, -0.02])
 def test_pinch_near_com_is_feasible(coord):
-    contacts = Contacts(Posture((B, T, B)), (0.0, coord, 0.0), active=(False, True, True))
+    contacts = Contacts(Posture((L, R, L)), (0.0, coord, 0.0), active=(False, True, True))
     contacts = contacts.moved(2, coord=coord)
     G, lam_lp, lam_sq = _both(contacts)
     assert G.shape == (3, 4)
@@ -176,17 +178,26 @@ def test_pinch_near_com_is_feasible(coord):
 
 
 def test_pinch_far_from_com_needs_large_squeeze():
-    """The gravity torque of a pinch 0.2 m from the COM is carried by the friction couple
-    across the 2 cm width: feasible, but only with normal forces far above the near pinch's."""
-    near = Contacts(Posture((B, T, B)), (0.0, 0.0, 0.0), active=(False, True, True))
-    far = Contacts(Posture((B, T, B)), (0.0, 0.2, 0.2), active=(False, True, True))
-    _, near_lp, _ = _both(near)
-    G, far_lp, far_sq = _both(far)
+    """Tilted to horizontal (theta = pi/2), the gravity torque of a pinch 0.2 m from the COM is
+    carried by the friction couple across the 2 cm width: feasible, but only with normal forces
+    far above the near pinch's. Upright, gravity runs along the pole and has no lever: the far
+    pinch costs no more than the near one."""
+    near = Contacts(Posture((L, R, L)), (0.0, 0.0, 0.0), active=(False, True, True))
+    far = Contacts(Posture((L, R, L)), (0.0, 0.2, 0.2), active=(False, True, True))
+    flat = np.pi / 2
+    _, near_lp, _ = _both(near, theta=flat)
+    G, far_lp, far_sq = _both(far, theta=flat)
     assert near_lp is not None and far_lp is not None and far_sq is not None
     _check_lam(G, far_sq, GRAVITY_WRENCH)
     assert far_lp[0::2].sum() > 10 * near_lp[0::2].sum()
     assert solve_lp(G, GRAVITY_WRENCH, MU, F_MIN, f_max=5.0) is None
     assert Squeeze.build(G, MU, F_MIN, 5.0).solve(GRAVITY_WRENCH) is None
+    _, near_up, _ = _both(near)
+    G, far_up, _ = _both(far)
+    assert near_up is not None and far_up is not None
+    _check_lam(G, far_up, GRAVITY_WRENCH)
+    assert far_up[0::2].sum() == pytest.approx(near_up[0::2].sum(), rel=1e-6)
+    assert solve_lp(G, GRAVITY_WRENCH, MU, F_MIN, f_max=5.0) is not None
 
 
 @pytest.mark.parametrize("w", [np.array([0.0, 200.0, 0.0]), np.array([150.0, 0.0, 0.0]),

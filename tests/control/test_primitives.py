@@ -2,7 +2,8 @@
 
 Every check is on the simulated state (object joint states, fingertip link positions, PyBullet
 contact points), never on what a controller commanded. The planar pole (0.5 x 0.02 m, 0.1 kg)
-starts at ``X0`` in a three-point bend grasp (fingers 0 and 2 below, finger 1 above).
+stands upright at ``X0`` in a three-point bend grasp (fingers 0 and 1 on its left side, finger 2
+on its right side between them); every link and the palm collide with it.
 """
 
 from __future__ import annotations
@@ -23,12 +24,13 @@ from inhand_exp.control.repose import Repose
 from inhand_exp.control.slide import Slide
 from inhand_exp.sim.world import World
 
-X0 = np.array([0.0, 0.2, 0.0])
-BEND = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
-FLIP_POSTURE = Posture((Face.TOP, Face.BOTTOM, Face.TOP))
-FLIP_SETUPS = {  # finger to flip -> a grasp from which it can go round an end
-    0: Contacts(FLIP_POSTURE, (-0.12, 0.03, 0.07)),
-    2: Contacts(FLIP_POSTURE, (-0.07, -0.03, 0.12)),
+L, R = Face.LEFT, Face.RIGHT
+X0 = np.array([0.0, 0.34, 0.0])
+BEND = Contacts(Posture((L, L, R)), (-0.21, -0.09, -0.15))
+XF = np.array([0.0, 0.40, 0.0])  # high enough for a finger to pass under the pole's lower end
+FLIP_SETUPS = {  # finger to flip -> a grasp whose other two fingers pinch the pole
+    0: Contacts(Posture((L, L, R)), (-0.15, -0.21, -0.205)),
+    2: Contacts(Posture((L, R, R)), (-0.21, -0.205, -0.15)),
 }
 UNIT_REPOSES = [np.array(d) for d in ([0.01, 0.0, 0.0], [-0.01, 0.0, 0.0], [0.0, 0.01, 0.0],
                                       [0.0, -0.01, 0.0], [0.0, 0.0, 0.1], [0.0, 0.0, -0.1])]
@@ -44,7 +46,7 @@ def contact_coords(world: World) -> np.ndarray:
     """Each fingertip's coordinate along the pole's long axis (3,) (m), as simulated."""
     pose = world.object_pose()
     tips_O = (world.tip_positions() - pose[:2]) @ rotation(pose[2])  # rows: R^T (tip - p)
-    return tips_O[:, 0]
+    return tips_O[:, 1]
 
 
 def touching(world: World) -> set[int]:
@@ -52,10 +54,10 @@ def touching(world: World) -> set[int]:
     return {c.finger for c in world.contacts()}
 
 
-def pushes_up(world: World) -> dict[int, bool]:
-    """Per finger in contact: True when it pushes from the BOTTOM face (object frame)."""
+def pushes_right(world: World) -> dict[int, bool]:
+    """Per finger in contact: True when it pushes from the LEFT side (towards +O_x)."""
     R = rotation(world.object_pose()[2])
-    return {c.finger: bool((R.T @ c.normal)[1] > 0) for c in world.contacts()}
+    return {c.finger: bool((R.T @ c.normal)[0] > 0) for c in world.contacts()}
 
 
 def pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
@@ -113,6 +115,7 @@ def test_hold_10s_keeps_the_pole_still(nominal_model, make_world):
     dpos, dang = pose_error(world.object_pose(), start)
     assert dpos < 1e-3 and dang < 0.01, (dpos, dang)
     assert touching(world) == {0, 1, 2}
+    assert world.hand_contacts() == []
 
 
 @pytest.mark.parametrize("delta", UNIT_REPOSES, ids=REPOSE_IDS)
@@ -142,8 +145,9 @@ def test_repose_sequence_of_20_random_unit_actions(nominal_model, make_world):
 # --- slide ------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("dc", [SLIDE_DC, -SLIDE_DC], ids=["+dc", "-dc"])
-@pytest.mark.parametrize("finger", [0, 1, 2])
+@pytest.mark.parametrize(("finger", "dc"), [(0, SLIDE_DC), (0, -SLIDE_DC), (1, SLIDE_DC),
+                                           (1, -SLIDE_DC), (2, SLIDE_DC)],
+                         ids=["0+", "0-", "1+", "1-", "2+"])
 def test_slide_moves_only_its_finger(nominal_model, make_world, finger, dc):
     world = make_world(BEND, X0)
     c0, p0 = contact_coords(world), world.object_pose()
@@ -159,8 +163,8 @@ def test_slide_moves_only_its_finger(nominal_model, make_world, finger, dc):
 
 
 @pytest.mark.parametrize(("finger", "dc", "why"), [
-    (2, 0.2, "past the end"),  # 0.12 + 0.2 lies beyond the pole's half length
-    (1, 0.2, "cannot hold"),  # the top finger outside the bottom pair: no squeeze
+    (2, 0.5, "past the end"),  # -0.15 + 0.5 lies beyond the pole's half length
+    (2, 0.08, "cannot hold"),  # the lone right finger outside the left pair: no squeeze
 ], ids=["past-end", "no-hold"])
 def test_slide_infeasible_leaves_world_untouched(nominal_model, make_world, finger, dc, why):
     world = make_world(BEND, X0)
@@ -177,14 +181,14 @@ def test_slide_infeasible_leaves_world_untouched(nominal_model, make_world, fing
 @pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))
 def test_flip_puts_finger_on_the_other_face(nominal_model, make_world, finger):
     contacts = FLIP_SETUPS[finger]
-    world = make_world(contacts, X0)
+    world = make_world(contacts, XF)
     assert execute(world, hold(nominal_model, contacts, 0.3)).reason == "done"
-    up_before, p0 = pushes_up(world), world.object_pose()
+    up_before, p0 = pushes_right(world), world.object_pose()
     assert set(up_before) == {0, 1, 2}
     flip = Flip(nominal_model, contacts, finger, FLIP_S)
     out = execute(world, flip)
     assert out.reason == "done", out
-    up_after = pushes_up(world)
+    up_after = pushes_right(world)
     assert set(up_after) == {0, 1, 2}
     assert up_after[finger] != up_before[finger]
     assert all(up_after[j] == up_before[j] for j in range(3) if j != finger)
@@ -198,7 +202,7 @@ def test_flip_puts_finger_on_the_other_face(nominal_model, make_world, finger):
 
 
 def test_flip_infeasible_when_the_pair_cannot_hold(nominal_model, make_world):
-    world = make_world(BEND, X0)  # fingers 1 (top) and 2 (bottom) alone cannot hold the pole
+    world = make_world(BEND, X0)  # fingers 1 and 2, 6 cm apart, cannot hold the pole alone
     before = snapshot(world)
     out = execute(world, Flip(nominal_model, BEND, 0, FLIP_S))
     assert out.reason == "infeasible" and not out.ok, out
@@ -209,13 +213,25 @@ def test_flip_infeasible_when_the_pair_cannot_hold(nominal_model, make_world):
 # --- failure detection ------------------------------------------------------------------------
 
 
-def test_limp_finger_drops_the_pole(nominal_model, make_world):
+@pytest.mark.parametrize("finger", [0, 1, 2])
+def test_limp_finger_fall_is_a_drop(nominal_model, make_world, finger):
+    """Whatever the hold reports, a pole that falls more than 2 cm is a drop."""
     world = make_world(BEND, X0)
     z0 = world.object_pose()[1]
-    out = execute(world, LimpFinger(hold(nominal_model, BEND, 2.0), finger=0))
-    assert out.reason in ("lost_contact", "infeasible"), out
-    assert not out.ok and out.detail
-    assert out.steps < round(2.0 / world.dt)
+    out = execute(world, LimpFinger(hold(nominal_model, BEND, 2.0), finger=finger))
+    assert not out.ok and out.detail, out
+    fell = z0 - world.object_pose()[1]
+    if fell > 0.02:
+        assert out.dropped, (fell, out)
+    if out.dropped:
+        assert out.steps < round(2.0 / world.dt) or fell > 0.02
+
+
+def test_a_limp_finger_drops_the_pole(nominal_model, make_world):
+    world = make_world(BEND, X0)  # finger 2, alone on its side, carries the bend
+    z0 = world.object_pose()[1]
+    out = execute(world, LimpFinger(hold(nominal_model, BEND, 2.0), finger=2))
+    assert out.reason == "lost_contact" and out.dropped, out
     assert world.object_pose()[1] < z0 - 5e-3
 
 
@@ -239,9 +255,10 @@ def test_grasp_lost_reports_why(nominal_model, make_world):
     world.step(np.zeros(6))
     lost = world.grasp_lost()
     assert isinstance(lost, str) and "0 fingertip" in lost, lost
-    # three tips touching, all from below: not held from opposite sides
-    below = Contacts(Posture((Face.BOTTOM,) * 3), (-0.12, 0.0, 0.12))
-    world.reset(X0, nominal_model.grasp_q(below, X0, press=0.0005))
+    # three tips touching, all on the left side: not held from opposite sides
+    one_side = Contacts(Posture((L, L, L)), (-0.21, -0.21, -0.12))
+    at = np.array([0.0, 0.3, 0.0])
+    world.reset(at, nominal_model.grasp_q(one_side, at, press=0.0005))
     world.step(np.zeros(6))
     assert touching(world) == {0, 1, 2}
     assert world.grasp_lost() == "object not held from opposite sides"
@@ -328,6 +345,24 @@ def test_grasp_out_of_reach_names_the_finger(nominal_model):
         nominal_model.grasp_q(BEND, np.array([0.0, 2.0, 0.0]))
 
 
+def test_grasp_whose_link_cuts_the_pole_is_rejected(nominal_model):
+    """Finger 2 (base right of the pole) on the left side low down: one elbow branch takes its
+    links through the pole, the other below the palm, and the model refuses the grasp."""
+    crossing = Contacts(Posture((L, R, L)), (-0.21, -0.15, -0.21))
+    finger = nominal_model.fingers[2]
+    target = nominal_model.tip_targets(crossing, X0)[2]
+    reachable = [finger.ik(target, e) for e in (1, -1)]
+    assert any(qi is not None for qi in reachable)  # the tip itself is within reach
+    assert all(nominal_model.finger_gap(2, qi, X0) < 0 for qi in reachable if qi is not None)
+    with pytest.raises(GeometryError, match="finger 2's links would cut into the object"):
+        nominal_model.grasp_q(crossing, X0)
+
+
+def test_pole_into_the_palm_is_rejected(nominal_model):
+    with pytest.raises(GeometryError, match="palm"):
+        nominal_model.grasp_q(BEND, np.array([0.0, 0.2, 0.0]))  # lower end 5 cm below it
+
+
 @pytest.mark.parametrize("finger", [0, 2])
 @pytest.mark.parametrize("shift", [0.0, 0.02, -0.03])
 def test_flip_landing_is_the_same_without_the_span_pruning(nominal_model, make_world,
@@ -338,7 +373,7 @@ def test_flip_landing_is_the_same_without_the_span_pruning(nominal_model, make_w
 
     base = FLIP_SETUPS[finger]
     contacts = base.moved(finger, coord=base.coords[finger] + shift)
-    world = make_world(contacts, X0)
+    world = make_world(contacts, XF)
     pose, twist = world.object_state()
     q, qd = world.joint_state()
     obs = Observation(q, qd, pose, twist, 0.0)

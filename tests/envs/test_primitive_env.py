@@ -9,12 +9,15 @@ from torchrl.envs.utils import check_env_specs
 
 from inhand_exp.control.execute import Observation
 from inhand_exp.control.grasp import Contacts, Face, Posture
-from inhand_exp.envs.primitive_env import PrimitiveEnv
+from inhand_exp.control.hand import HandModel
+from inhand_exp.envs.primitive_env import OUTCOMES, PrimitiveEnv
 from inhand_exp.task.actions import make_primitive
 from inhand_exp.task.goals import GoalPair
 
-BEND = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
-X0 = np.array([0.0, 0.2, 0.0])
+L, R = Face.LEFT, Face.RIGHT
+BEND = Contacts(Posture((L, L, R)), (-0.21, -0.09, -0.15))
+X0 = np.array([0.0, 0.34, 0.0])
+XF = np.array([0.0, 0.40, 0.0])
 
 
 def one_pair(dx: float) -> list[GoalPair]:
@@ -86,22 +89,23 @@ def test_same_seed_same_rollout(compose_cfg):
 
 
 @pytest.mark.parametrize(("angle", "seen_before", "paid"), [
-    (-0.6, False, 1.0),  # the flipped finger pushes the pole towards the goal angle
-    (0.6, False, 0.0),   # ... away from it
-    (-0.6, True, 0.0),   # useful, but the posture was already reached in this episode
+    (0.6, False, 1.0),   # the flipped finger pushes the pole towards the goal angle
+    (-0.6, False, 0.0),  # ... away from it
+    (0.6, True, 0.0),    # useful, but the posture was already reached in this episode
 ])
 def test_flip_reward_is_paid_for_useful_flips_to_new_postures(compose_cfg, angle, seen_before,
                                                               paid):
-    start = Contacts(Posture((Face.TOP, Face.BOTTOM, Face.TOP)), (-0.07, -0.03, 0.12))
-    pair = GoalPair("hard", X0.copy(), X0 + np.array([0.0, 0.0, angle]), start)
+    start = Contacts(Posture((L, R, R)), (-0.21, -0.205, -0.15))
+    pair = GoalPair("hard", XF.copy(), XF + np.array([0.0, 0.0, angle]), start)
     env = PrimitiveEnv(compose_cfg(), goals=[pair], seed=0)
     td = env.reset()
     if seen_before:
-        env.postures.add(Posture((Face.TOP, Face.BOTTOM, Face.BOTTOM)))
+        env.postures.add(Posture((L, R, L)))
     flip = next(a.index for a in env.actions if a.name == "flip right")
     assert td["action_mask"][flip]
     out = env.step(td.set("action", torch.tensor(flip)))["next"]
-    assert str(env.contacts.posture) == "top/bottom/bottom"
+    assert str(env.contacts.posture) == "left/right/left"
+    assert OUTCOMES[int(out["outcome"])] == "done"
     assert out["reward"].item() == pytest.approx(paid)
 
 
@@ -132,3 +136,52 @@ def test_once_idles_after_the_last_goal(compose_cfg):
     out = env.step(td)["next"]
     assert bool(out["done"]) and float(out["reward"]) == 0.0 and not bool(out["terminated"])
     assert env.world.time_s == clock  # nothing simulated
+
+
+def test_contact_bookkeeping_reads_the_observed_pose_under_noise(compose_cfg, monkeypatch):
+    """With noise=paper the controllers' contacts come from the noisy pose they observe."""
+    seen = []
+    measured = HandModel.measured
+
+    def spy(model, contacts, pose, q):
+        seen.append(np.array(pose, dtype=float))
+        return measured(model, contacts, pose, q)
+
+    monkeypatch.setattr(HandModel, "measured", spy)
+    env = PrimitiveEnv(compose_cfg("noise=paper"), goals=one_pair(0.05), seed=3)
+    td = env.reset()
+    for _ in range(3):
+        seen.clear()
+        assert env.offset.any()  # noise was drawn
+        observed = env.pose + env.offset  # what the controllers and the policy saw
+        np.testing.assert_allclose(td["observation"][12:15].numpy(), observed, atol=1e-6)
+        td = env.step(td.set("action", td["action_mask"].float().argmax(-1)))["next"]
+        true_now = env.world.object_pose()
+        book = [p for p in seen if np.allclose(p, env.pose + env.offset)]
+        assert book, "the contacts were not measured with the observed pose"
+        assert not any(np.allclose(p, true_now) for p in seen)
+
+
+def test_limp_finger_in_the_env_is_a_drop_when_the_pole_falls(compose_cfg):
+    """A finger that goes limp during an action: a fall of more than 2 cm is recorded as a
+    drop, whatever the primitive itself reported."""
+    falls = []
+    for finger in range(3):
+        env = PrimitiveEnv(compose_cfg(), goals=one_pair(0.05), seed=0)
+        td = env.reset()
+        step = env.world.step
+
+        def limp(tau, finger=finger, step=step):
+            tau = np.array(tau, dtype=float)
+            tau[2 * finger:2 * finger + 2] = 0.0
+            step(tau)
+
+        env.world.step = limp
+        z0 = env.world.object_pose()[1]
+        plus_x = next(a.index for a in env.actions if a.name == "repose +x")
+        out = env.step(td.set("action", torch.tensor(plus_x)))["next"]
+        fell = z0 - env.world.object_pose()[1]
+        falls.append(fell)
+        if fell > 0.02:
+            assert out["dropped"].item() and out["done"].item(), (finger, fell)
+    assert max(falls) > 0.02  # some finger's loss lets the pole fall

@@ -9,14 +9,16 @@ import pytest
 from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
 from inhand_exp.control.execute import Observation
 from inhand_exp.control.grasp import Contacts, Face, Posture
-from inhand_exp.control.hand import HandModel
+from inhand_exp.control.hand import GeometryError, HandModel
 from inhand_exp.control.repose import Gains, GraspPlan, Repose, min_jerk, repose_torques
 from inhand_exp.sim.world import BODY_LINK, TIP_LINK, ObjectSpec, World
 
 SIM, HAND, OBJ = SimConfig(), HandConfig(), ObjectConfig()
 G_ACC = SIM.gravity_mps2
-BEND = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
-POSE = np.array([0.0, 0.2, 0.0])
+# the upright pole held in a three-point bend: finger 2 alone on the right side, between the
+# other two along the pole; every link clear of it
+BEND = Contacts(Posture((Face.LEFT, Face.LEFT, Face.RIGHT)), (-0.21, -0.09, -0.15))
+POSE = np.array([0.0, 0.34, 0.0])
 FAR = np.array([2.0, 0.2, 0.3])  # object pose well out of the fingers' reach (0.32 m)
 Q_FREE = np.array([0.5, 0.5, 1.5, 0.3, 2.0, -0.5])
 
@@ -142,8 +144,9 @@ def test_hold_contacts_balance_gravity(world, model):
         cs = sorted(world.contacts(), key=lambda c: c.finger)
         assert [c.finger for c in cs] == [0, 1, 2]
         for c in cs:
-            up = 1.0 if BEND.posture.faces[c.finger] == Face.BOTTOM else -1.0
-            np.testing.assert_allclose(c.normal, [0.0, up], atol=1e-3)
+            # inward: a finger on the left side pushes along +x, on the right along -x
+            inward = 1.0 if BEND.posture.faces[c.finger] == Face.LEFT else -1.0
+            np.testing.assert_allclose(c.normal, [inward, 0.0], atol=1e-3)
             assert c.normal_force > 0
         return cs
 
@@ -155,7 +158,9 @@ def test_hold_contacts_balance_gravity(world, model):
     np.testing.assert_allclose(pose, POSE, atol=1e-3)  # held still
     force = sum(c.normal_force * c.normal + c.tangential_force * c.tangent for c in cs)
     weight = OBJ.mass_kg * G_ACC
+    # upright, the weight runs along the pole: friction alone carries it
     np.testing.assert_allclose(force, [0.0, weight], rtol=0, atol=0.05 * weight)
+    assert world.hand_contacts() == []  # the links and the palm stay clear
     torque = 0.0
     for c in cs:
         (rx, rz), (fx, fz) = c.position - pose[:2], c.normal_force * c.normal + \
@@ -181,7 +186,8 @@ def test_perturbation_scales_simulated_body():
         assert info[2][1] == pytest.approx(iyy, rel=1e-9)
         (shape,) = pb.getCollisionShapeData(w.object, BODY_LINK, physicsClientId=w.client)
         assert shape[2] == pb.GEOM_BOX
-        np.testing.assert_allclose(shape[3], [length, OBJ.depth_m, width], rtol=1e-9)
+        # width along the object's x, length along its z: the pole stands upright at theta 0
+        np.testing.assert_allclose(shape[3], [width, OBJ.depth_m, length], rtol=1e-9)
     finally:
         w.close()
 
@@ -190,49 +196,81 @@ def test_default_object_is_unscaled(world):
     info = pb.getDynamicsInfo(world.object, BODY_LINK, physicsClientId=world.client)
     assert info[0] == pytest.approx(OBJ.mass_kg, rel=1e-12)
     (shape,) = pb.getCollisionShapeData(world.object, BODY_LINK, physicsClientId=world.client)
-    np.testing.assert_allclose(shape[3], [OBJ.length_m, OBJ.depth_m, OBJ.width_m], rtol=1e-9)
+    np.testing.assert_allclose(shape[3], [OBJ.width_m, OBJ.depth_m, OBJ.length_m], rtol=1e-9)
 
 
-@pytest.mark.parametrize("link, z", [(0, 0.08), (1, 0.24)])
-def test_finger_links_never_touch_object(link, z):
-    """Finger 1 points straight up; the pole lies across its proximal (z 0-0.16) or distal
-    (z 0.16-0.32) link. The shapes overlap, yet no contact is generated; re-enabling the pair
-    shows the overlap would otherwise produce one."""
-    q = np.array([-1.5, 0.0, np.pi / 2, 0.0, -1.5, 0.0])  # fingers 0 and 2 point down
-    pose = np.array([0.0, z, 0.0])
-    for enable in (0, 1):
-        w = _world()
-        try:
-            w.reset(pose, q)
-            cid, finger = w.client, w.fingers[1]
-            overlap = pb.getClosestPoints(w.object, w.fingers[1], 0.0, BODY_LINK, link,
-                                          physicsClientId=cid)
-            assert overlap and min(p[8] for p in overlap) < -0.01
-            if enable:
-                pb.setCollisionFilterPair(w.object, finger, BODY_LINK, link, 1,
-                                          physicsClientId=cid)
-            w.step(np.zeros(6))
-            pts = pb.getContactPoints(w.object, finger, physicsClientId=cid)
-            links = {p[4] for p in pts}
-            if enable:
-                assert link in links
-            else:
-                assert not links & {0, 1}
-                assert w.contacts() == []
-                assert all(p[4] == TIP_LINK for f in w.fingers
-                           for p in pb.getContactPoints(w.object, f, physicsClientId=cid))
-        finally:
-            w.close()
+@pytest.mark.parametrize("link, name, z", [(0, "proximal", 0.08), (1, "distal", 0.24)])
+def test_link_moved_into_object_makes_contact(link, name, z):
+    """Finger 1 points straight up; the pole, lying across it (theta = pi/2), cuts through its
+    proximal (z 0-0.16) or distal (z 0.16-0.32) link, clear of the tip. The simulator reports
+    that link touching the object, and no fingertip contact, right after the reset and after a
+    step."""
+    q = np.array([np.pi, 0.0, np.pi / 2, 0.0, 0.0, 0.0])  # fingers 0 and 2 flat along the palm
+    pose = np.array([0.0, z, np.pi / 2])
+    w = _world()
+    try:
+        w.reset(pose, q)
+        cid, finger = w.client, w.fingers[1]
+        overlap = pb.getClosestPoints(w.object, finger, 0.0, BODY_LINK, link,
+                                      physicsClientId=cid)
+        assert overlap and min(p[8] for p in overlap) < -0.01
+        assert not pb.getClosestPoints(w.object, finger, 0.0, BODY_LINK, TIP_LINK,
+                                       physicsClientId=cid)  # the tip is clear
+        assert w.hand_contacts() == [f"finger 1 {name}"]
+        assert w.contacts() == []  # no fingertip contact, finger 1's included
+        w.step(np.zeros(6))
+        assert pb.getContactPoints(w.object, finger, BODY_LINK, link, physicsClientId=cid)
+        assert w.hand_contacts() == [f"finger 1 {name}"]
+        assert w.contacts() == []
+    finally:
+        w.close()
+
+
+# every finger resting on a joint limit, its distal link hanging, all well clear of a pole
+# standing between the bases of fingers 1 and 2: at rest under gravity with zero torques
+_LO, _HI = HAND.joint_lower_rad[0], HAND.joint_upper_rad[0]
+Q_AWAY = np.array([_HI, 3 * np.pi / 2 - _HI, _HI, 3 * np.pi / 2 - _HI, _LO, -np.pi / 2 - _LO])
+BETWEEN_X = 0.06  # between the bases of fingers 1 (x = 0) and 2 (x = 0.12)
+
+
+def test_object_overlapping_the_palm_touches_it(world, model):
+    """The pole's lower end 5 mm into the palm plate: the simulator reports the palm touching
+    it (and nothing else), and the controllers' model refuses a grasp there."""
+    pose = np.array([BETWEEN_X, OBJ.length_m / 2 - 0.005, 0.0])
+    assert model.palm_gap(pose) == pytest.approx(-0.005)
+    world.reset(pose, Q_AWAY)
+    assert world.hand_contacts() == ["palm"]
+    assert world.contacts() == []
+    with pytest.raises(GeometryError, match="palm"):
+        model.grasp_q(BEND, pose)
+
+
+def test_unheld_pole_dropped_comes_to_rest_on_the_palm(world, model):
+    """Dropped upright from 5 cm above the palm, fingers out of the way, the pole lands on its
+    lower end and stands on the palm: it neither sinks through nor bounces off."""
+    start = np.array([BETWEEN_X, OBJ.length_m / 2 + 0.05, 0.0])
+    world.reset(start, Q_AWAY)
+    assert world.hand_contacts() == [] and model.palm_gap(start) == pytest.approx(0.05)
+    for _ in range(round(1.0 / world.dt)):
+        world.step(np.zeros(6))
+        assert model.palm_gap(world.object_pose()) > -2e-3  # never through the palm
+    pose, twist = world.object_state()
+    assert world.hand_contacts() == ["palm"]
+    assert world.contacts() == []
+    np.testing.assert_allclose(pose, [BETWEEN_X, OBJ.length_m / 2, 0.0], atol=1e-3)
+    assert np.abs(twist).max() < 1e-3  # at rest
+    np.testing.assert_allclose(world.joint_q(), Q_AWAY, atol=1e-3)  # the fingers stayed away
 
 
 def test_contact_forces_balance_an_external_push():
-    """Held still while pushed along +x, the measured contact forces on the object must sum to
-    the push reversed plus the weight: a check of every contact's tangential sign."""
+    """Held still while pushed up along the pole harder than its weight, the measured contact
+    forces on the object must sum to the push reversed plus the weight: friction now has to
+    pull the pole down, a check of every contact's tangential sign."""
     sim, hand, obj = SimConfig(), HandConfig(), ObjectConfig()
     world = World(sim, hand, ObjectSpec.from_config(obj))
     model = HandModel.from_config(hand, obj, sim.gravity_mps2)
-    contacts = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
-    pose = np.array([0.0, 0.2, 0.0])
+    contacts = Contacts(Posture((Face.LEFT, Face.LEFT, Face.RIGHT)), (-0.21, -0.09, -0.15))
+    pose = np.array([0.0, 0.34, 0.0])
     world.reset(pose, model.grasp_q(contacts, pose, press=0.0005))
     hold = Repose(model, contacts, np.zeros(3), 2.0)
 
@@ -242,16 +280,19 @@ def test_contact_forces_balance_an_external_push():
         return Observation(q, qd, p, tw, t)
 
     hold.start(observe(0.0))
-    push = 0.3
+    weight = obj.mass_kg * sim.gravity_mps2
+    push = 1.5 * weight  # along the object's O_z (the pole's long axis)
     for k in range(480):
-        pb.applyExternalForce(world.object, 2, [push, 0, 0], [0, 0, 0], pb.LINK_FRAME,
+        pb.applyExternalForce(world.object, 2, [0, 0, push], [0, 0, 0], pb.LINK_FRAME,
                               physicsClientId=world.client)
         world.step(hold.torques(observe(k * world.dt)))
     total = sum(c.normal_force * c.normal + c.tangential_force * c.tangent
                 for c in world.contacts())
-    weight = obj.mass_kg * sim.gravity_mps2
+    theta = world.object_pose()[2]
+    axis = np.array([-np.sin(theta), np.cos(theta)])  # O_z in the hand frame
     assert len(world.contacts()) == 3
-    np.testing.assert_allclose(total, [-push, weight], atol=0.02 * weight)
-    # the push is shared: each finger's tangential force opposes it
-    assert all(c.tangential_force * c.tangent[0] < 0 for c in world.contacts())
+    assert world.hand_contacts() == []
+    np.testing.assert_allclose(total, -push * axis + [0.0, weight], atol=0.02 * weight)
+    # the net load is up the pole: each finger's tangential force pulls the pole down
+    assert all(c.tangential_force * (c.tangent @ axis) < 0 for c in world.contacts())
     world.close()

@@ -60,8 +60,8 @@ def observe(world: World) -> Observation:
 
 def test_bend_grasp_mask(pole_setup):
     cfg, model, world = pole_setup
-    contacts = Contacts(Posture((Face.BOTTOM, Face.TOP, Face.BOTTOM)), (-0.12, 0.0, 0.12))
-    pose = np.array([0.0, 0.2, 0.0])
+    contacts = Contacts(Posture((Face.LEFT, Face.LEFT, Face.RIGHT)), (-0.21, -0.09, -0.15))
+    pose = np.array([0.0, 0.34, 0.0])
     world.reset(pose, model.grasp_q(contacts, pose, press=0.0005))
     actions = action_table(cfg.primitives)
     mask, planned = feasibility(actions, model, contacts, Gains(), cfg.primitives,
@@ -69,6 +69,8 @@ def test_bend_grasp_mask(pole_setup):
     kinds = np.array([a.kind for a in actions])
     assert mask[kinds == "repose"].all()  # small reposes of a centred grasp are all reachable
     assert not mask[kinds == "flip"].any()  # fingers 1 and 2 (or 0 and 1) cannot hold alone
+    slides = np.array([a.name for a in actions])[mask & (kinds == "slide")]
+    assert "slide finger 2 -" not in slides and len(slides) == 5  # the lone finger stays put
     assert all((p is not None) == m for p, m in zip(planned, mask, strict=True))
     reposes = [p for p, a in zip(planned, actions, strict=True) if a.kind == "repose"]
     assert all(p.plan is reposes[0].plan for p in reposes)  # one force plan for the six

@@ -52,11 +52,28 @@ def test_goals_are_not_already_solved(model, group):
         assert p.group == group
 
 
+def test_hard_sets_need_flips_and_easy_and_medium_sets_never(model):
+    """``needs_flip``: no grasp of the initial posture holds the object at the goal."""
+    from inhand_exp.control.sample import grasp_of
+
+    hard = goal_set(model, "hard", 24, seed=11)
+    flips = [p for p in hard if p.needs_flip]
+    assert len(flips) >= 3  # about 28 % of hard pairs on the default workspace
+    for p in flips:  # the flag is the feasibility model's own verdict, found again here
+        assert grasp_of(model, p.contacts.posture, p.xg) is None
+    for p in hard:
+        if not p.needs_flip:
+            assert grasp_of(model, p.contacts.posture, p.xg) is not None
+    for group in ("easy", "medium"):
+        assert not any(p.needs_flip for p in goal_set(model, group, 12, seed=11))
+
+
 def test_save_load_round_trip_and_no_overwrite(model, tmp_path):
     pairs = goal_set(model, "hard", 4, seed=4)
     path = save_goals(pairs, tmp_path / "goals.csv")
     back = load_goals(path)
     assert [p.contacts.posture for p in back] == [p.contacts.posture for p in pairs]
+    assert [p.needs_flip for p in back] == [p.needs_flip for p in pairs]
     np.testing.assert_allclose([p.xg for p in back], [p.xg for p in pairs], atol=1e-8)
     np.testing.assert_allclose([p.contacts.coords for p in back],
                                [p.contacts.coords for p in pairs], atol=1e-8)
@@ -72,6 +89,7 @@ def test_save_load_round_trip_and_no_overwrite(model, tmp_path):
     (lambda df: df.assign(faces="top/side/bottom"), "line 2: faces must be three of"),
     (lambda df: df.assign(x0_x="abc"), "line 2: a pose or contact is not a number"),
     (lambda df: df.assign(c1=float("nan")), "line 2: non-finite"),
+    (lambda df: df.assign(needs_flip="maybe"), "line 2: needs_flip must be true or false"),
 ])
 def test_bad_goal_files_name_the_problem(model, tmp_path, edit, message):
     path = tmp_path / "bad.csv"

@@ -30,7 +30,9 @@ from inhand_exp.config import ConfigError, PerturbConfig, validate
 
 # Trials per section when --trials is not given: the targets of the physics milestone.
 DEFAULT_TRIALS = {"hold": 100, "repose": 1000, "slide": 500, "flip_left": 200,
-                  "flip_right": 200, "perturbed": 200, "release": 200, "land": 200}
+                  "flip_right": 200, "flip_left_tilted": 100, "flip_right_tilted": 100,
+                  "perturbed": 200, "release": 200, "land": 200}
+TILTED_RAD = 1.0  # the flip_*_tilted sections start from |theta| >= this
 PERTURBATIONS = {"heavier": dict(mass_scale=1.1), "lighter": dict(mass_scale=0.9),
                  "thicker": dict(width_scale=1.5), "thinner": dict(width_scale=0.5),
                  "longer": dict(length_scale=1.1), "shorter": dict(length_scale=0.9)}
@@ -60,6 +62,8 @@ def _run_trial(cfg: DictConfig, setting: tuple, name: str, seed: int, index: int
     fn: Callable = {"hold": trials.hold, "repose": trials.repose, "slide": trials.slide,
                     "flip_left": partial(trials.flip, finger=0),
                     "flip_right": partial(trials.flip, finger=2),
+                    "flip_left_tilted": partial(trials.flip, finger=0, min_tilt=TILTED_RAD),
+                    "flip_right_tilted": partial(trials.flip, finger=2, min_tilt=TILTED_RAD),
                     "release": trials.release, "land": trials.land}[name]
     return fn(bench, rng)
 
@@ -87,7 +91,8 @@ def run_section(pool, cfg, setting, name, n, seed) -> dict:
 
 
 def primitives(args, cfg: DictConfig) -> dict:
-    names = ["hold", "repose", "slide", "flip_left", "flip_right"]
+    names = ["hold", "repose", "slide", "flip_left", "flip_right", "flip_left_tilted",
+             "flip_right_tilted"]
     if cfg.object.name == "cube":
         names = ["hold", "repose", "release", "land"]
     only = args.only.split(",") if args.only else names + ["perturbed"]

@@ -17,10 +17,10 @@ from inhand_exp.config import ObjectConfig, PerturbConfig
 from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, rotation
-from inhand_exp.control.hand import HandModel
+from inhand_exp.control.hand import GeometryError, HandModel
 from inhand_exp.control.release_land import Land, Release
 from inhand_exp.control.repose import Gains, Repose
-from inhand_exp.control.sample import random_grasp
+from inhand_exp.control.sample import Workspace, pinch_grasp, random_grasp
 from inhand_exp.control.slide import Slide
 from inhand_exp.sim.world import ObjectSpec, World, wrap_angle
 
@@ -57,6 +57,7 @@ class Bench:
                                 obj.width_m * p.width_scale, obj.depth_m,
                                 obj.mass_kg * p.mass_scale, obj.friction)
         self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
+        self.workspace = Workspace.from_config(cfg.task)
         prim = cfg.primitives
         self.gains = Gains.from_config(prim)
         self.durations = {"repose": prim.repose_duration_s, "slide": prim.slide_duration_s,
@@ -65,9 +66,15 @@ class Bench:
         self.steps = {"repose": prim.repose_dx_m, "dz": prim.repose_dz_m,
                       "dtheta": prim.repose_dtheta_rad, "slide": prim.slide_dc_m}
 
-    def start(self, rng: np.random.Generator) -> Contacts:
-        """Reset the world at a random valid grasp of the simulated object."""
-        pose, contacts, q = random_grasp(self.true_model, rng)
+    def start(self, rng: np.random.Generator, pinch: int | None = None,
+              workspace: Workspace | None = None) -> Contacts:
+        """Reset the world at a random valid grasp of the simulated object; with ``pinch``, one
+        where the other two fingers could hold it alone (``sample.pinch_grasp``)."""
+        ws = workspace or self.workspace
+        if pinch is None:
+            pose, contacts, q = random_grasp(self.true_model, rng, ws)
+        else:
+            pose, contacts, q = pinch_grasp(self.true_model, rng, pinch, ws)
         self.world.reset(pose, q)
         return contacts
 
@@ -84,13 +91,13 @@ class Bench:
     def coords(self) -> np.ndarray:
         """Simulated contact coordinate of each fingertip along the object's long axis (m)."""
         pose = self.world.object_pose()
-        return (self.world.tip_positions() - pose[:2]) @ rotation(pose[2])[:, 0]
+        return (self.world.tip_positions() - pose[:2]) @ rotation(pose[2])[:, 1]
 
     def faces(self) -> dict[int, float]:
         """Per finger in contact: the sign of the contact normal across the pole (+1: pushes
-        from below, i.e. the finger is on the bottom face)."""
+        towards +O_x, i.e. the finger is on the left face)."""
         pose = self.world.object_pose()
-        across = rotation(pose[2])[:, 1]
+        across = rotation(pose[2])[:, 0]
         return {c.finger: float(np.sign(c.normal @ across)) for c in self.world.contacts()}
 
 
@@ -163,10 +170,20 @@ def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
                  time.perf_counter() - t)
 
 
-def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 400) -> Trial | None:
-    """A flip of ``finger`` from a random grasp where the flip's own check allows it."""
+def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 200,
+         min_tilt: float = 0.0) -> Trial | None:
+    """A flip of ``finger`` from a random pinch grasp (tilted at least ``min_tilt`` rad from
+    upright, to either side) where the flip's own check allows it."""
+    ws = b.workspace
     for _ in range(max_grasps):
-        contacts = b.start(rng)
+        if min_tilt > 0:
+            side = 1 if rng.random() < 0.5 else -1
+            lo, hi = sorted((side * min_tilt, side * max(abs(ws.low[2]), abs(ws.high[2]))))
+            ws = Workspace((ws.low[0], ws.low[1], lo), (ws.high[0], ws.high[1], hi))
+        try:
+            contacts = b.start(rng, pinch=finger, workspace=ws)
+        except GeometryError:  # no pinch grasp at all in this part of the workspace
+            return None
         prim = Flip(b.model, contacts, finger, b.durations["flip"], b.gains)
         if _feasible(prim, b.observe()):
             break

@@ -51,37 +51,76 @@ class WorldLike(Protocol):
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]: ...
     def step(self, tau: np.ndarray) -> None: ...
     def grasp_lost(self) -> str | None: ...
+    def hand_contacts(self) -> list[str]: ...
 
 
 StateCheck = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], "str | None"]
 
+# How every primitive can end. A drop is lost_contact or unstable.
+REASONS = ("done", "infeasible", "lost_contact", "unstable", "timeout", "link_contact")
+
 
 @dataclass(frozen=True)
 class Outcome:
-    """How a primitive ended: ``reason`` is done, infeasible, lost_contact, unstable, timeout
-    (the time ran out before the goal was reached)."""
+    """How a primitive ended: ``reason`` is one of ``REASONS``:
+
+    - done: the primitive's goal reached, only fingertips touching the object;
+    - infeasible: refused at the start, or its force plan failed on the way (the hand then
+      held its joints still for ``settle_s`` and the object was still held);
+    - lost_contact: the object was no longer held (PyBullet's contacts), or it fell or slid
+      more than ``fall_m`` from where the primitive was taking it: a drop;
+    - unstable: the simulation blew up (NaN, runaway speeds): a drop;
+    - timeout: the time ran out before the goal was reached;
+    - link_contact: a link or the palm touched the object on the way (``detail`` names them);
+      ``reached`` says whether the goal was reached all the same.
+    """
 
     ok: bool
     reason: str
     detail: str
     sim_time_s: float
     steps: int
+    reached: bool = False
+
+    @property
+    def dropped(self) -> bool:
+        return self.reason in ("lost_contact", "unstable")
+
+
+def _off_course(pose: np.ndarray, start: np.ndarray, delta: np.ndarray) -> float:
+    """How far (m) ``pose`` is from the straight path ``start`` -> ``start + delta`` in x-z."""
+    d = delta[:2]
+    n = float(d @ d)
+    s = 0.0 if n == 0.0 else min(1.0, max(0.0, float((pose[:2] - start[:2]) @ d) / n))
+    return float(np.linalg.norm(pose[:2] - start[:2] - s * d))
+
+
+def joint_hold(q_ref: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: float = 40.0,
+               kd: float = 2.0) -> np.ndarray:
+    """A safe stop: a joint PD holding the fingers where they were (N m)."""
+    return kp * (q_ref - q) - kd * qd
 
 
 def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | None = None,
             check_every: int = 4, drop_grace_s: float = 0.05,
-            state_check: StateCheck = state_problem, started: bool = False) -> Outcome:
+            state_check: StateCheck = state_problem, started: bool = False,
+            fall_m: float = 0.02, settle_s: float = 0.25) -> Outcome:
     """Drive ``primitive`` for its duration; stop early on infeasibility, a drop or instability.
 
     ``pose_offset`` is the observation error on the object pose (noise drawn by the caller, held
     for the primitive). Every ``check_every`` steps the simulated state is checked with
-    ``state_check`` and the grasp from PyBullet's contacts; a loss lasting ``drop_grace_s`` is a
-    drop. ``started``: the primitive was already planned (``start`` accepted) on the current
-    state, as the feasibility filter does, so it is not planned again.
+    ``state_check``, the grasp from PyBullet's contacts (a loss lasting ``drop_grace_s`` is a
+    drop), how far the object is from the path the primitive moves it along (more than
+    ``fall_m`` is a drop, wherever the fingertips are) and whether any part of the hand but the
+    fingertips touches it. ``started``: the primitive was already planned (``start`` accepted)
+    on the current state, as the feasibility filter does, so it is not planned again. When the
+    force plan fails on the way, the hand holds its joints for ``settle_s`` and the object is
+    judged again: a drop if it is not held then.
     """
     offset = np.zeros(3) if pose_offset is None else pose_offset
     n = round(primitive.duration_s / world.dt)
     lost_since: float | None = None
+    touched: set[str] = set()
 
     def read() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         pose, twist = world.object_state()
@@ -92,6 +131,15 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
     why = None if started else primitive.start(Observation(q, qd, pose + offset, twist, 0.0))
     if why is not None:
         return Outcome(False, "infeasible", why, 0.0, 0)
+    start = pose.copy()
+    goal = getattr(primitive, "goal", None)
+    origin = getattr(primitive, "origin", None)
+    delta = np.zeros(3) if goal is None or origin is None else goal - origin
+
+    def fell(pose: np.ndarray) -> str | None:
+        off = _off_course(pose, start, delta)
+        return None if off <= fall_m else f"object {off * 100:.1f} cm off its course"
+
     for k in range(n):
         if k:
             pose, twist, q, qd = read()
@@ -101,13 +149,16 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
                     return Outcome(False, "unstable", bad, k * world.dt, k)
         tau = primitive.torques(Observation(q, qd, pose + offset, twist, k * world.dt))
         if tau is None:
-            return Outcome(False, "infeasible", "no contact forces inside the friction cones",
-                           k * world.dt, k)
+            return _safe_stop(world, q, k, fell, state_check, settle_s, check_every)
         world.step(tau)
         if (k + 1) % check_every:
             continue
+        touched.update(world.hand_contacts())
         lost = world.grasp_lost()
         if lost is None:
+            lost = fell(world.object_state()[0])
+            if lost is not None:
+                return Outcome(False, "lost_contact", lost, (k + 1) * world.dt, k + 1)
             lost_since = None
         elif lost_since is None:
             lost_since = k * world.dt
@@ -117,7 +168,32 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
     bad = state_check(pose, twist, q, qd)
     if bad is not None:
         return Outcome(False, "unstable", bad, n * world.dt, n)
+    lost = fell(pose) or (world.grasp_lost() if lost_since is not None else None)
+    if lost is not None:
+        return Outcome(False, "lost_contact", lost, n * world.dt, n)
     missing = primitive.achieved(Observation(q, qd, pose + offset, twist, n * world.dt))
+    if touched:
+        return Outcome(False, "link_contact", ", ".join(sorted(touched)) + " touched the object",
+                       n * world.dt, n, reached=missing is None)
     if missing is not None:
         return Outcome(False, "timeout", missing, n * world.dt, n)
-    return Outcome(True, "done", "", n * world.dt, n)
+    return Outcome(True, "done", "", n * world.dt, n, reached=True)
+
+
+def _safe_stop(world: WorldLike, q_ref: np.ndarray, k: int, fell, state_check: StateCheck,
+               settle_s: float, check_every: int) -> Outcome:
+    """The force plan failed after ``k`` steps: hold the joints, then judge the grasp."""
+    m = round(settle_s / world.dt)
+    for j in range(m):
+        q, qd = world.joint_state()
+        world.step(joint_hold(q_ref, q, qd))
+        if (j + 1) % check_every == 0:
+            pose, twist = world.object_state()
+            bad = state_check(pose, twist, q, qd)
+            if bad is not None:
+                return Outcome(False, "unstable", bad, (k + j + 1) * world.dt, k + j + 1)
+    t = (k + m) * world.dt
+    lost = world.grasp_lost() or fell(world.object_state()[0])
+    if lost is not None:
+        return Outcome(False, "lost_contact", f"force plan failed, then {lost}", t, k + m)
+    return Outcome(False, "infeasible", "no contact forces inside the friction cones", t, k + m)

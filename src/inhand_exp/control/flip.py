@@ -1,10 +1,12 @@
 """Flip (pole): take one finger off its face, carry it round the end, put it on the other face.
 
 Phases, as fractions of the duration: unload (the flipping finger's share of the contact force
-ramps to zero while the other two take the whole load), travel (the free tip follows waypoints
-fixed in the object frame: lift clear of the face, round the end nearer the finger's base, across
-to the other face), touch (the tip presses onto the new face), load (the force distribution is
-planned again from the measured contacts and ramps from two contacts to three), settle. The two
+ramps to zero while the other two take the whole load), travel (the finger lifts its tip off
+the face, then follows a path planned in its joint space round the object, links and tip clear
+of it and above the palm, to hover off the other face: for an upright pole that is under its
+lower end, often changing the elbow branch through the straight finger), touch (the tip presses
+onto the new face), load (the force distribution is planned again from the measured contacts
+and ramps from two contacts to three), settle. The two
 fingers that stay must hold the object alone: they must push from opposite faces, and the
 two-contact force problem must be feasible. The object is held at its start pose throughout.
 """
@@ -20,7 +22,8 @@ from inhand_exp.control.grasp import (
     rotation,
 )
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.handover import PathTracker, blended_forces, hover, route_round
+from inhand_exp.control.handover import blended_forces, hover
+from inhand_exp.control.joint_path import FreeSpace, JointPath, arrival_times, plan_joint_path
 from inhand_exp.control.repose import (
     Gains,
     GraspPlan,
@@ -66,7 +69,7 @@ def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: Ga
     return full, pair
 
 
-def handover_torques(model: HandModel, pair: GraspPlan, finger: int, mix, tracker: PathTracker,
+def handover_torques(model: HandModel, pair: GraspPlan, finger: int, mix, tracker,
                      elbow: int, obs, origin: np.ndarray, gains: Gains, kp: float, kd: float
                      ) -> np.ndarray | None:
     """Torques while ``pair`` holds the object at ``origin`` and ``finger`` follows a path."""
@@ -102,16 +105,20 @@ class Flip:
 
     It lands at the coordinate nearest its present one where the new grasp admits a squeeze
     strictly inside the friction cones (a grasp that only gravity makes feasible proved fragile
-    while the force is handed over) and where the whole path is reachable.
+    while the force is handed over), where the finger touches with its links clear and where a
+    path in the finger's joint space (``joint_path``) gets it there without touching the object.
     """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
-                 gains: Gains | None = None, clearance_m: float = 0.025, press_m: float = 0.001,
-                 kp_joint: float = 900.0, kd_joint: float = 60.0):
+                 gains: Gains | None = None, clearance_m: float = 0.02, press_m: float = 0.001,
+                 kp_joint: float = 900.0, kd_joint: float = 60.0, max_plans: int = 6,
+                 air_m: float = 0.006):
         self.model, self.contacts, self.finger = model, contacts, finger
         self.duration_s, self.gains = duration_s, gains or Gains()
         self.clearance, self.press = clearance_m, press_m
         self.kp, self.kd = kp_joint, kd_joint
+        self.max_plans = max_plans  # landings whose path is searched for, nearest first
+        self.air = air_m  # margin of the travel round the object (links and tip)
         self.times = phase_times(duration_s, PHASES)
 
     @property
@@ -131,55 +138,77 @@ class Flip:
         self.contacts = model.measured(c, obs.pose, obs.q)
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
         self.origin = obs.pose.copy()
-        k = self.full.fingers.index(i)
-        found = self._landing(obs, self.full.tips_O[k], c.posture.faces[i])
+        found = self._landing(obs, c.posture.faces[i])
         if found is None:
-            return f"no reachable landing on the other face holds the object for finger {i}"
+            return f"no landing on the other face that holds the object has a clear path for " \
+                   f"finger {i}"
         self.coord, self.tracker = found
         self.loaded: GraspPlan | None = None
         return None
 
-    def _landing(self, obs, tip_O: np.ndarray, face: Face, step_m: float = 0.005
-                 ) -> tuple[float, PathTracker] | None:
-        """The landing coordinate and its path, nearest the present coordinate first."""
+    def _ik_clear(self, point_O: np.ndarray, pose: np.ndarray, R: np.ndarray,
+                  margin: float, prefer: int | None = None) -> np.ndarray | None:
+        """Joint angles putting the tip centre at ``point_O`` with the links ``margin`` clear,
+        the branch ``prefer`` first."""
+        f = self.model.fingers[self.finger]
+        order = (1, -1) if prefer is None or prefer == 1 else (-1, 1)
+        for elbow in order:
+            qi = f.ik(pose[:2] + R @ point_O, elbow)
+            if qi is not None and f.within_limits(qi, 0.05) and \
+                    self.model.finger_gap(self.finger, qi, pose) >= margin:
+                return qi
+        return None
+
+    def _landing(self, obs, face: Face, step_m: float = 0.005
+                 ) -> tuple[float, JointPath] | None:
+        """The landing coordinate and the finger's joint path, nearest the present first."""
         model, i = self.model, self.finger
+        shape, r = model.shape, model.tip_radius
         new_face = OPPOSITE[face]
         here = self.contacts.coords[i]
-        n = int((model.shape.half_extent(new_face) - 2 * model.tip_radius) // step_m)
-        R = rotation(obs.pose[2])
+        n = int((shape.half_extent(new_face) - 2 * r) // step_m)
+        pose, R = obs.pose, rotation(obs.pose[2])
         span = landing_span(model, self.contacts, i, new_face, self.gains)
         if span is None:
             return None
         lo, hi = span[0] - SPAN_TOL_M, span[1] + SPAN_TOL_M
+        q0 = obs.q[2 * i:2 * i + 2].copy()
+        inward, along = face_axes(face)
+        k = self.full.fingers.index(i)
+        lift_O = self.full.tips_O[k] - self.clearance * inward
+        q_lift = self._ik_clear(lift_O, pose, R, model.clearance, prefer=self.elbow)
+        if q_lift is None:
+            return None
+        space = FreeSpace(model, i, pose, self.air)
+        if not space.ok(q_lift):
+            return None
+        hx, hz = shape.half_x, shape.half_z
+        tries = 0
         for coord in sorted((k * step_m for k in range(-n, n + 1)), key=lambda c: abs(c - here)):
             if not lo <= coord <= hi:
                 continue
-            tracker = PathTracker(self._path(tip_O, face, coord), self.times["travel"][0],
-                                  self.times["touch"][1])
-            if tracker.reachable(model, i, self.elbow, obs.pose, R) and strict_hold(
+            q_touch = self._ik_clear(hover(hx, hz, new_face, coord, r - self.press), pose, R,
+                                     model.clearance)
+            if q_touch is None:
+                continue
+            branch = 1 if q_touch[1] >= 0 else -1
+            q_hover = self._ik_clear(hover(hx, hz, new_face, coord, r + self.clearance), pose,
+                                     R, model.clearance, prefer=branch)
+            if q_hover is None or not space.ok(q_hover) or not strict_hold(
                     model, self.contacts.moved(i, coord=coord, face=new_face), self.gains):
-                return coord, tracker
+                continue
+            tries += 1
+            way = plan_joint_path(space, q_lift, q_hover)
+            if way is not None:
+                t_lift = self.times["travel"][0] + 0.1 * (self.times["travel"][1]
+                                                           - self.times["travel"][0])
+                times = [self.times["travel"][0],
+                         *arrival_times(way, t_lift, self.times["travel"][1]),
+                         self.times["touch"][1]]
+                return coord, JointPath([q0, *way, q_touch], times)
+            if tries >= self.max_plans:
+                return None
         return None
-
-    def _path(self, tip_O: np.ndarray, face: Face, coord: float) -> list[np.ndarray]:
-        """Tip-centre waypoints (object frame): lift, round the end nearer the base, touch."""
-        shape, r = self.model.shape, self.model.tip_radius
-        hx, hz = shape.length_m / 2, shape.width_m / 2
-        gap = r + self.clearance
-        new_face = OPPOSITE[face]
-        inward, along = face_axes(face)
-        base_x = self.model.fingers[self.finger].base_x
-        R = rotation(self.origin[2])
-        ends_x = [self.origin[0] + (R @ (e * hx * along))[0] for e in (-1, 1)]
-        left_end = abs(ends_x[0] - base_x) <= abs(ends_x[1] - base_x)
-        via = Face.LEFT if left_end else Face.RIGHT
-        # counter-clockwise when the end to pass is the next face counter-clockwise of ours
-        ccw = {Face.TOP: Face.LEFT, Face.LEFT: Face.BOTTOM, Face.BOTTOM: Face.RIGHT,
-               Face.RIGHT: Face.TOP}
-        ring = route_round(hx, hz, tip_O - self.clearance * inward, face, new_face,
-                           hover(hx, hz, new_face, coord, gap), gap,
-                           direction=1 if ccw[face] == via else -1)
-        return [tip_O, *ring, hover(hx, hz, new_face, coord, r - self.press)]
 
     def achieved(self, obs, tol_m: float = 0.003) -> str | None:
         """The tip on the new face, within ``tol_m`` of the landing."""
@@ -203,4 +232,3 @@ class Flip:
             mix = [(self.pair, 1 - s), (self.loaded, s)]
         return handover_torques(self.model, self.pair, self.finger, mix, self.tracker,
                                 self.elbow, obs, self.origin, self.gains, self.kp, self.kd)
-

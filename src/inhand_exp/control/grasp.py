@@ -1,10 +1,12 @@
 """Grasp postures and contact configurations on a box-shaped object, and the 2D grasp matrix.
 
-Object frame ``O``: origin at the centre of mass, ``O_x`` along the long axis, ``O_z`` across it,
-rotated by ``theta`` from the hand frame. A box has four faces; a finger's contact is given by
-its face and its coordinate along that face (m, measured from the face centre, positive towards
-``+O_x`` on the top/bottom faces and ``+O_z`` on the end faces). These types live in ``control``
-because the controllers need them; ``task`` builds on them.
+Object frame ``O``: origin at the centre of mass, ``O_z`` along the long axis, ``O_x`` across it,
+rotated by ``theta`` from the hand frame: at ``theta = 0`` a pole stands upright between the
+fingers, and ``theta`` is its tilt from vertical (counter-clockwise, to the left). A box has four
+faces: LEFT and RIGHT are a pole's long sides, TOP and BOTTOM its ends. A finger's contact is
+given by its face and its coordinate along that face (m, measured from the face centre, positive
+towards ``+O_x`` on the top/bottom faces and ``+O_z`` on the left/right faces). These types live
+in ``control`` because the controllers need them; ``task`` builds on them.
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ import numpy as np
 
 
 class Face(IntEnum):
-    """A side of the box: TOP is +O_z, BOTTOM -O_z, RIGHT +O_x, LEFT -O_x."""
+    """A side of the box: TOP is +O_z, BOTTOM -O_z, RIGHT +O_x, LEFT -O_x (a pole's long sides
+    are LEFT and RIGHT)."""
 
     TOP = 0
     BOTTOM = 1
@@ -68,7 +71,8 @@ class Contacts:
 
 @dataclass(frozen=True)
 class BoxShape:
-    """The controller's model of the object: a uniform box (m, kg)."""
+    """The controller's model of the object: a uniform box (m, kg), ``length_m`` along ``O_z``
+    (the long axis) and ``width_m`` along ``O_x``."""
 
     length_m: float
     width_m: float
@@ -78,14 +82,28 @@ class BoxShape:
     def inertia(self) -> float:
         return self.mass_kg * (self.length_m**2 + self.width_m**2) / 12
 
+    @property
+    def half_x(self) -> float:
+        """Half the extent along ``O_x`` (across the long axis)."""
+        return self.width_m / 2
+
+    @property
+    def half_z(self) -> float:
+        """Half the extent along ``O_z`` (the long axis)."""
+        return self.length_m / 2
+
     def half_extent(self, face: Face) -> float:
         """Half the length of ``face`` (the range of its contact coordinate)."""
-        return self.length_m / 2 if face in (Face.TOP, Face.BOTTOM) else self.width_m / 2
+        return self.half_x if face in (Face.TOP, Face.BOTTOM) else self.half_z
+
+    def depth(self, face: Face) -> float:
+        """Distance from the centre of mass to ``face``'s plane."""
+        return self.half_z if face in (Face.TOP, Face.BOTTOM) else self.half_x
 
     def local_contact(self, face: Face, coord: float) -> tuple[np.ndarray, np.ndarray]:
         """Contact point ``O_p`` on the surface and the inward unit normal ``O_n``, in O."""
         out, along = _OUTWARD[face], _ALONG[face]
-        depth = self.width_m / 2 if face in (Face.TOP, Face.BOTTOM) else self.length_m / 2
+        depth = self.depth(face)
         p = np.array([out[0] * depth + along[0] * coord, out[1] * depth + along[1] * coord])
         return p, -np.array(out)
 

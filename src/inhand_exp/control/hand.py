@@ -2,31 +2,42 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from inhand_exp.config import HandConfig, ObjectConfig
+from inhand_exp.control.clearance import lowest_corner, segment_box_distance, to_object
 from inhand_exp.control.finger import FingerModel
 from inhand_exp.control.grasp import BoxShape, Contacts, contact_frames, rotation
 
-# Elbow branch per finger for inverse kinematics: the outer fingers bend inwards, which lets
-# them reach round the ends of the object.
-ELBOWS = (1, 1, -1)
+# Fraction of the tip radius by which the distal link's capsule is cut short for the clearance
+# check: up to there the tip's sphere covers the capsule (a link radius of 2/3 the tip's).
+TIP_OVERLAP = 0.75
 
 
 class GeometryError(ValueError):
-    """The hand cannot realise a grasp (a tip out of reach or outside its joint limits)."""
+    """The hand cannot realise a grasp (a tip out of reach or outside its joint limits, or a
+    link that would cut into the object)."""
 
 
 @dataclass(frozen=True)
 class HandModel:
-    """Three fingers, their tip radius and the nominal object, as the controllers know them."""
+    """Three fingers, their tip radius and the nominal object, as the controllers know them.
+
+    The links are capsules of ``link_radius`` that must keep ``clearance`` of air to the object;
+    the palm is the plane z = base z between ``palm_x`` (the object must stay ``clearance``
+    above it, and no finger joint or tip goes below it there).
+    """
 
     fingers: tuple[FingerModel, FingerModel, FingerModel]
     tip_radius: float
     shape: BoxShape
     mu: float  # friction coefficient of fingertip on object, as combined by the simulator
+    link_radius: float = 0.008
+    clearance: float = 0.002
+    palm_x: tuple[float, float] = (-math.inf, math.inf)
 
     @classmethod
     def from_config(cls, hand: HandConfig, obj: ObjectConfig, gravity: float) -> HandModel:
@@ -36,7 +47,10 @@ class HandModel:
                               tuple(hand.joint_lower_rad), tuple(hand.joint_upper_rad), gravity)
             for x in hand.finger_base_x_m)
         shape = BoxShape(obj.length_m, obj.width_m, obj.mass_kg)
-        model = cls(fingers, hand.tip_radius_m, shape, hand.friction * obj.friction)
+        xs = hand.finger_base_x_m
+        model = cls(fingers, hand.tip_radius_m, shape, hand.friction * obj.friction,
+                    hand.link_radius_m, hand.link_clearance_m,
+                    (xs[0] - hand.palm_overhang_m, xs[-1] + hand.palm_overhang_m))
         model._check_reach(obj)
         return model
 
@@ -58,20 +72,59 @@ class HandModel:
     def grasp_q(self, contacts: Contacts, pose: np.ndarray, press: float = 0.0) -> np.ndarray:
         """Joint angles (6,) placing every tip on its contact, ``press`` metres into the surface.
 
-        Raises ``GeometryError`` naming the finger when a contact is out of reach or limits.
+        Of the two elbow branches, the one whose links stay clear of the object and the palm
+        (the larger gap when both do). Raises ``GeometryError`` naming the finger when a
+        contact is out of reach or limits, or its links would cut into the object.
         """
+        if self.palm_gap(pose) < self.clearance:
+            raise GeometryError(f"the object at z = {pose[1]:.3f} m, theta = {pose[2]:.2f} rad "
+                                f"would cut into the palm")
         pts, nrm = contact_frames(self.shape, contacts, pose)
         q = np.empty(6)
         for i, finger in enumerate(self.fingers):
             target = pts[i] - (self.tip_radius - press) * nrm[i]
-            qi = finger.ik(target, ELBOWS[i])
-            if qi is None:
-                qi = finger.ik(target, -ELBOWS[i])
-            if qi is None:
+            branches = [qi for qi in (finger.ik(target, e) for e in (1, -1)) if qi is not None]
+            if not branches:
                 raise GeometryError(f"finger {i} cannot reach its contact at "
                                     f"({target[0]:.3f}, {target[1]:.3f}) m")
+            gap, qi = max(((self.finger_gap(i, qi, pose), k, qi)
+                           for k, qi in enumerate(branches)), key=lambda g: g[:2])[::2]
+            if gap < self.clearance:
+                raise GeometryError(f"finger {i}'s links would cut into the object or the palm "
+                                    f"to reach its contact ({gap * 1e3:.1f} mm)")
             q[2 * i:2 * i + 2] = qi
         return q
+
+    def palm_gap(self, pose: np.ndarray) -> float:
+        """Height of the object's lowest point above the palm (m)."""
+        return lowest_corner(pose, self.shape.half_x, self.shape.half_z) - self.fingers[0].base_z
+
+    def finger_gap(self, i: int, qi: np.ndarray, pose: np.ndarray) -> float:
+        """Air between finger ``i``'s links (at joint angles ``qi``) and the object at
+        ``pose`` (m, 0 or less when they touch); ``-inf`` when a joint or the tip is below the
+        palm. The distal link counts up to where the tip's sphere covers it."""
+        f = self.fingers[i]
+        q1, q12 = float(qi[0]), float(qi[0]) + float(qi[1])
+        ex, ez = f.base_x + f.l1 * math.cos(q1), f.base_z + f.l1 * math.sin(q1)
+        tx, tz = ex + f.l2 * math.cos(q12), ez + f.l2 * math.sin(q12)
+        lo, hi = self.palm_x
+        if any(lo <= x <= hi and z < f.base_z for x, z in ((ex, ez), (tx, tz))):
+            return -math.inf
+        px, pz, c, s = float(pose[0]), float(pose[1]), math.cos(pose[2]), math.sin(pose[2])
+        b = to_object(f.base_x, f.base_z, px, pz, c, s)
+        e = to_object(ex, ez, px, pz, c, s)
+        # the last bit of the distal link lies inside the tip's sphere, which may touch
+        inner = (f.l2 - TIP_OVERLAP * self.tip_radius) / f.l2
+        t = to_object(ex + inner * (tx - ex), ez + inner * (tz - ez), px, pz, c, s)
+        hx, hz = self.shape.half_x, self.shape.half_z
+        return min(segment_box_distance(*b, *e, hx, hz),
+                   segment_box_distance(*e, *t, hx, hz)) - self.link_radius
+
+    def clear(self, q: np.ndarray, pose: np.ndarray, fingers=(0, 1, 2)) -> bool:
+        """The object above the palm and the links of ``fingers`` clear of it, by the
+        clearance margin."""
+        return self.palm_gap(pose) >= self.clearance and all(
+            self.finger_gap(i, q[2 * i:2 * i + 2], pose) >= self.clearance for i in fingers)
 
     def tips(self, q: np.ndarray) -> np.ndarray:
         """Fingertip centres (3, 2) from joint angles (6,)."""

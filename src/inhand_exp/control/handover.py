@@ -67,8 +67,13 @@ class PathTracker:
 
     def reachable(self, model: HandModel, finger: int, elbow: int, pose: np.ndarray,
                   R: np.ndarray) -> bool:
-        return all(model.fingers[finger].ik(pose[:2] + R @ p, elbow) is not None
-                   for p in self.dense())
+        """Every point of the path within reach and limits, with the links clear."""
+        f = model.fingers[finger]
+        for p in self.dense():
+            qi = f.ik(pose[:2] + R @ p, elbow)
+            if qi is None or model.finger_gap(finger, qi, pose) < model.clearance:
+                return False
+        return True
 
     def qdd(self, model: HandModel, finger: int, elbow: int, obs, R: np.ndarray,
             kp: float, kd: float, h: float = 1e-3) -> np.ndarray:

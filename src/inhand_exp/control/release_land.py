@@ -116,11 +116,10 @@ class Land:
     def _candidates(self, tip_O: np.ndarray):
         """(path length, face, coordinate, path) for every landing, shortest first."""
         shape, r = self.model.shape, self.model.tip_radius
-        hx, hz = shape.length_m / 2, shape.width_m / 2
+        hx, hz = shape.half_x, shape.half_z
         gap = r + self.clearance
         # the face the free tip is off: the one whose outward distance is largest
-        here = max(Face, key=lambda f: float(-face_axes(f)[0] @ tip_O)
-                   - (hz if f in (Face.TOP, Face.BOTTOM) else hx))
+        here = max(Face, key=lambda f: float(-face_axes(f)[0] @ tip_O) - shape.depth(f))
         out = []
         for face in Face:
             n = int((shape.half_extent(face) - 2 * r) // self.step)

@@ -265,11 +265,16 @@ class Repose:
             return "no contact forces inside the friction cones hold the object here"
         self.origin = obs.pose.copy()
         self.goal = self.origin + self.delta
+        if self.model.palm_gap(self.goal) < self.model.clearance:
+            return "the object would come down onto the palm"
         R = rotation(self.goal[2])
         for k, i in enumerate(self.plan.fingers):
             tip = self.goal[:2] + R @ self.plan.tips_O[k]
-            if self.model.fingers[i].ik(tip, 1 if obs.q[2 * i + 1] >= 0 else -1) is None:
+            qi = self.model.fingers[i].ik(tip, 1 if obs.q[2 * i + 1] >= 0 else -1)
+            if qi is None:
                 return f"finger {i} cannot follow the object to the target pose"
+            if self.model.finger_gap(i, qi, self.goal) < self.model.clearance:
+                return f"finger {i}'s links would cut into the object at the target pose"
         return None
 
     def achieved(self, obs) -> str | None:

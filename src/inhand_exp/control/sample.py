@@ -1,6 +1,15 @@
-"""Seeded sampling of valid grasps: object poses, postures and contacts the hand can hold."""
+"""Seeded sampling of valid grasps: object poses, postures and contacts the hand can hold.
+
+The workspace is a box of object poses (x, z, theta); a pose is kept only with a grasp that the
+controllers' model accepts: every tip reaches its contact within the joint limits, every link
+and the palm stay clear of the object (``HandModel.grasp_q``) and the contacts admit a squeeze
+strictly inside the friction cones (``strict_hold``).
+"""
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -8,17 +17,31 @@ from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import GeometryError, HandModel
 from inhand_exp.control.repose import Gains, strict_hold
 
-# Pose ranges of sampled grasps (m, m, rad): centred over the hand, within easy reach.
-POSE_LOW = np.array([-0.06, 0.16, -0.4])
-POSE_HIGH = np.array([0.06, 0.24, 0.4])
+
+@dataclass(frozen=True)
+class Workspace:
+    """Bounds of the object poses (m, m, rad) that goals and trials are drawn from."""
+
+    low: tuple[float, float, float] = (-0.05, 0.18, -math.pi / 2)
+    high: tuple[float, float, float] = (0.05, 0.52, math.pi / 2)
+
+    @classmethod
+    def from_config(cls, task) -> Workspace:
+        (x0, x1), (z0, z1), (t0, t1) = (task.workspace_x_m, task.workspace_z_m,
+                                        task.workspace_theta_rad)
+        return cls((x0, z0, t0), (x1, z1, t1))
+
+    def draw(self, rng: np.random.Generator) -> np.ndarray:
+        return rng.uniform(self.low, self.high)
 
 
 def lone_between(rng: np.random.Generator, half: float, gap: float = 0.06
                  ) -> tuple[Posture, tuple[float, float, float]]:
-    """A pole posture with a lone finger between the other two, on the opposite long face."""
+    """A pole posture with a lone finger between the other two along the pole, on the opposite
+    long side (a three-point bend)."""
     lone = int(rng.integers(3))
-    side = Face.TOP if rng.random() < 0.5 else Face.BOTTOM
-    other = Face.BOTTOM if side == Face.TOP else Face.TOP
+    side = Face.LEFT if rng.random() < 0.5 else Face.RIGHT
+    other = Face.RIGHT if side == Face.LEFT else Face.LEFT
     a = rng.uniform(-half, half - 2 * gap)
     b = rng.uniform(a + 2 * gap, half)
     mid = rng.uniform(a + gap / 2, b - gap / 2)
@@ -31,12 +54,12 @@ def lone_between(rng: np.random.Generator, half: float, gap: float = 0.06
     return Posture(tuple(faces)), tuple(coords)
 
 
-def any_faces(rng: np.random.Generator, half_x: float, half_z: float
+def any_faces(rng: np.random.Generator, half_long: float, half_short: float
               ) -> tuple[Posture, tuple[float, float, float]]:
     """A box posture with every finger on a random face at a random coordinate."""
     faces = tuple(Face(int(f)) for f in rng.integers(4, size=3))
     coords = tuple(float(rng.uniform(-h, h)) for h in
-                   (half_x if f in (Face.TOP, Face.BOTTOM) else half_z for f in faces))
+                   (half_short if f in (Face.TOP, Face.BOTTOM) else half_long for f in faces))
     return Posture(faces), coords
 
 
@@ -45,27 +68,158 @@ def elongated(model: HandModel) -> bool:
     return model.shape.length_m > 2 * model.shape.width_m
 
 
-def random_grasp(model: HandModel, rng: np.random.Generator, max_tries: int = 2000,
-                 press: float = 0.0005) -> tuple[np.ndarray, Contacts, np.ndarray]:
-    """A random object pose and three-finger grasp that the hand reaches and that holds.
-
-    A pole gets a lone finger between the other two on its long faces; a cube any faces.
-    Returns ``(pose, contacts, q)``. Rejection sampling, deterministic for a given ``rng``.
-    """
+def grasp_contacts(model: HandModel, rng: np.random.Generator) -> Contacts:
+    """Random contacts of the object's kind of grasp (not yet checked)."""
     r = model.tip_radius
-    half_x, half_z = model.shape.length_m / 2 - 3 * r, model.shape.width_m / 2 - 2 * r
+    if elongated(model):
+        return Contacts(*lone_between(rng, model.shape.half_z - 3 * r))
+    return Contacts(*any_faces(rng, model.shape.half_z - 2 * r, model.shape.half_x - 2 * r))
+
+
+def holds_at(model: HandModel, contacts: Contacts, pose: np.ndarray, press: float = 0.0,
+             margin: float = 0.05) -> np.ndarray | None:
+    """Joint angles holding ``contacts`` at ``pose`` with every joint ``margin`` rad inside its
+    limits and every link clear, or None. (Whether the contacts can squeeze is separate:
+    ``strict_hold``, which does not depend on the pose.)"""
+    try:
+        q = model.grasp_q(contacts, pose, press=press)
+    except GeometryError:
+        return None
+    if all(f.within_limits(q[2 * i:2 * i + 2], margin=margin)
+           for i, f in enumerate(model.fingers)):
+        return q
+    return None
+
+
+def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
+                step_m: float = 0.005, margin: float = 0.1) -> list[float]:
+    """Coordinates along ``face`` (every ``step_m``) where ``finger`` alone can touch the
+    object at ``pose``: reach, joint limits with ``margin`` and links clear."""
+    r = model.tip_radius
+    n = int((model.shape.half_extent(face) - 2 * r) // step_m)
+    probe = Contacts(Posture((face,) * 3), (0.0, 0.0, 0.0))
+    out = []
+    for k in range(-n, n + 1):
+        c = k * step_m
+        target = model.tip_targets(probe.moved(0, coord=c), pose)[0]
+        f = model.fingers[finger]
+        for elbow in (1, -1):
+            qi = f.ik(target, elbow)
+            if (qi is not None and f.within_limits(qi, margin)
+                    and model.finger_gap(finger, qi, pose) >= model.clearance):
+                out.append(c)
+                break
+    return out
+
+
+def grasp_of(model: HandModel, posture: Posture, pose: np.ndarray,
+             rng: np.random.Generator | None = None, tries: int = 60,
+             margin: float = 0.1) -> Contacts | None:
+    """Contacts of ``posture`` that hold the object at ``pose`` (``holds_at`` and
+    ``strict_hold``), or None when none is found.
+
+    Each finger's reachable coordinates are found on a 5 mm grid first; then up to ``tries``
+    triples of them are checked: random ones with ``rng``; without it (a deterministic
+    existence check), first the widest pair with the lone finger nearest its middle, then
+    seeded random ones. For a pole whose posture has a lone finger on one side, only triples
+    with the lone finger between the other two are tried: no other three-point grasp squeezes.
+    """
+    if model.palm_gap(pose) < model.clearance:
+        return None
+    sets = [face_coords(model, i, f, pose, margin=margin) for i, f in enumerate(posture.faces)]
+    if not all(sets):
+        return None
+    faces = posture.faces
+    lone = [i for i in range(3) if faces.count(faces[i]) == 1]
+    gen = rng if rng is not None else np.random.default_rng(0)
+    cands: list[tuple[float, float, float]] = []
+    if elongated(model) and lone:
+        k = lone[0]
+        a, b = (j for j in range(3) if j != k)
+        if rng is None:  # the widest pairs first, the lone finger nearest their middle
+            for lo, hi in ((a, b), (b, a)):
+                c = [0.0, 0.0, 0.0]
+                c[lo], c[hi] = min(sets[lo]), max(sets[hi])
+                c[k] = min(sets[k], key=lambda v, m=(c[lo] + c[hi]) / 2: abs(v - m))
+                cands.append((c[0], c[1], c[2]))
+    for _ in range(40 * tries):
+        if len(cands) >= tries:
+            break
+        c = tuple(float(s[int(gen.integers(len(s)))]) for s in sets)
+        if elongated(model) and lone:
+            k = lone[0]
+            a, b = (c[j] for j in range(3) if j != k)
+            if not min(a, b) < c[k] < max(a, b):
+                continue
+        cands.append(c)
+    gains = Gains()
+    for c in cands:
+        contacts = Contacts(posture, c)
+        if strict_hold(model, contacts, gains) and holds_at(model, contacts, pose,
+                                                            margin=margin) is not None:
+            return contacts
+    return None
+
+
+def postures(model: HandModel) -> list[Posture]:
+    """The grasp postures of the object: a pole's lone-finger postures on its long sides."""
+    if elongated(model):
+        sides = (Face.LEFT, Face.RIGHT)
+        return [Posture((a, b, c)) for a in sides for b in sides for c in sides
+                if len({a, b, c}) == 2]
+    return [Posture((a, b, c)) for a in Face for b in Face for c in Face]
+
+
+def random_grasp(model: HandModel, rng: np.random.Generator,
+                 workspace: Workspace | None = None, max_tries: int = 2000,
+                 press: float = 0.0005, posture: Posture | None = None,
+                 exclude: Posture | None = None) -> tuple[np.ndarray, Contacts, np.ndarray]:
+    """A pose drawn uniformly from the part of ``workspace`` the hand can hold, and a
+    three-finger grasp that holds it: the tips reach, the links are clear, the contacts squeeze.
+
+    Each pose drawn from the box is kept when some posture (``posture`` if given, never
+    ``exclude``; tried in random order) has a grasp there, so every holdable pose is as likely
+    as any other, however few postures hold it. Returns ``(pose, contacts, q)``; deterministic
+    for a given ``rng``.
+    """
+    ws = workspace or Workspace()
+    choices = [posture] if posture is not None else [p for p in postures(model) if p != exclude]
     for _ in range(max_tries):
-        pose = rng.uniform(POSE_LOW, POSE_HIGH)
-        posture, coords = (lone_between(rng, half_x) if elongated(model)
-                           else any_faces(rng, half_x + r, half_z))
-        contacts = Contacts(posture, coords)
-        if not strict_hold(model, contacts, Gains()):
+        pose = ws.draw(rng)
+        if model.palm_gap(pose) < model.clearance:
             continue
-        try:
-            q = model.grasp_q(contacts, pose, press=press)
-        except GeometryError:
-            continue
-        if all(f.within_limits(q[2 * i:2 * i + 2], margin=0.1)
-               for i, f in enumerate(model.fingers)):
-            return pose, contacts, q
+        for k in rng.permutation(len(choices)):
+            contacts = grasp_of(model, choices[int(k)], pose, rng, tries=8)
+            if contacts is not None:
+                q = holds_at(model, contacts, pose, press=press, margin=0.1)
+                if q is not None:
+                    return pose, contacts, q
     raise GeometryError(f"no valid grasp found in {max_tries} tries")
+
+
+def pinch_grasp(model: HandModel, rng: np.random.Generator, finger: int,
+                workspace: Workspace | None = None, max_tries: int = 4000,
+                press: float = 0.0005) -> tuple[np.ndarray, Contacts, np.ndarray]:
+    """A random pole grasp in which the two fingers other than ``finger`` pinch the object from
+    opposite sides at nearly the same place (within 1 cm), so that they could hold it alone:
+    the start of a flip or a release of ``finger``. Returns ``(pose, contacts, q)``."""
+    ws = workspace or Workspace()
+    a, b = (j for j in range(3) if j != finger)
+    gains = Gains()
+    for _ in range(max_tries):
+        pose = ws.draw(rng)
+        faces = [Face.LEFT, Face.LEFT, Face.LEFT]
+        faces[a] = Face.LEFT if rng.random() < 0.5 else Face.RIGHT
+        faces[b] = Face.RIGHT if faces[a] == Face.LEFT else Face.LEFT
+        faces[finger] = Face.LEFT if rng.random() < 0.5 else Face.RIGHT
+        posture = Posture(tuple(faces))
+        sets = [face_coords(model, i, f, pose) for i, f in enumerate(faces)]
+        if not all(sets):
+            continue
+        coords = [float(s[int(rng.integers(len(s)))]) for s in sets]
+        coords[b] = coords[a] + float(rng.uniform(-0.01, 0.01))
+        contacts = Contacts(posture, tuple(coords))
+        q = holds_at(model, contacts, pose, press=press, margin=0.1)
+        if q is not None and strict_hold(model, contacts, gains):
+            return pose, contacts, q
+    raise GeometryError(f"no pinch grasp for finger {finger} found in {max_tries} tries")

@@ -64,6 +64,8 @@ class Slide:
             return f"finger {i} cannot reach the end of the slide"
         if abs(np.sin(q_end[1])) < self.min_bend:
             return f"finger {i} would end the slide stretched nearly straight"
+        if model.finger_gap(i, q_end, obs.pose) < model.clearance:
+            return f"finger {i}'s links would cut into the object at the end of the slide"
         t_O = np.array([-self.n_O[1], self.n_O[0]])
         drag = model.mu * float(np.sign(self.dc) * (self.along_O @ t_O))
         self.plan = plan_for(model, c, obs, self.gains, sliding=i, drag=drag)

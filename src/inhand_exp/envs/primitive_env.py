@@ -26,6 +26,7 @@ from inhand_exp.config import ObjectConfig, PerturbConfig
 from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import Gains
+from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.snapshots import STATE_WIDTH, Snapshots
 from inhand_exp.envs.specs import declare_mid_level_specs
 from inhand_exp.sim.world import ObjectSpec, World
@@ -35,7 +36,8 @@ from inhand_exp.task.rules import Rules, flip_useful, reached, reward, to_go
 
 PRESS_M = 0.0005  # initial fingertip press into the surface (m)
 # how the last action ended: an execute() reason, "rejected" by the filter, or "none" (reset)
-OUTCOMES = ("none", "done", "infeasible", "lost_contact", "unstable", "timeout", "rejected")
+OUTCOMES = ("none", "done", "infeasible", "lost_contact", "unstable", "timeout", "rejected",
+            "link_contact")
 
 
 def _object_config(node) -> ObjectConfig:
@@ -69,6 +71,8 @@ class PrimitiveEnv(EnvBase):
         self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
         self.prim = cfg.primitives
         self.groups = tuple(cfg.goals.train_groups) or (cfg.goals.name,)
+        self.workspace = Workspace.from_config(cfg.task)
+        self.hard_posture = cfg.goals.hard_goal_posture
         self.gains, self.rules = Gains.from_config(cfg.primitives), Rules.from_config(cfg.task)
         self.filter = str(cfg.task.filter.value if hasattr(cfg.task.filter, "value")
                           else cfg.task.filter)
@@ -104,15 +108,21 @@ class PrimitiveEnv(EnvBase):
 
     def _output(self, valid: bool, outcome: str, **done) -> TensorDict:
         obs, self.offset, self.pose = self._observe()
+        # contact bookkeeping from what the controllers see: the observed pose, never the true
+        self.contacts = self.model.measured(self.contacts, obs.pose, obs.q)
         self.mask, self.planned = feasibility(self.actions, self.model, self.contacts,
                                               self.gains, self.prim, obs)
         mask = self.mask if self.filter == "mask" else np.ones_like(self.mask)
         vec = np.concatenate([obs.q, obs.qd, obs.pose, self.goal]).astype(np.float32)
         stuck = self.filter == "mask" and not mask.any()
         flags = {k: torch.tensor([v]) for k, v in done.items()}
-        if stuck:  # no action is allowed: the episode cannot go on
-            flags["truncated"] = torch.tensor([True])
-            flags["done"] = torch.tensor([True])
+        if stuck:
+            # No action is allowed: without noise the episode cannot go on. Under noise the
+            # next observation differs (and a reset may not end an episode): any action may
+            # be picked, and the one picked is refused by its primitive, as an invalid action.
+            if not self.noise.any() and outcome != "none":
+                flags["truncated"] = torch.tensor([True])
+                flags["done"] = torch.tensor([True])
             mask = np.ones_like(mask)  # keep the distribution defined
         self.action_spec.update_mask(torch.from_numpy(mask))  # rand_action samples allowed ones
         td = TensorDict({
@@ -148,7 +158,7 @@ class PrimitiveEnv(EnvBase):
         else:
             group = self.groups[int(self.rng.integers(len(self.groups)))] \
                 if len(self.groups) > 1 else self.groups[0]
-            pair = sample_pair(self.model, group, self.rng)
+            pair = sample_pair(self.model, group, self.rng, self.workspace, self.hard_posture)
         self.episode += 1
         self.pair, self.goal, self.contacts = pair, pair.xg.copy(), pair.contacts
         self.postures = {pair.contacts.posture}  # reached so far in this episode
@@ -182,17 +192,16 @@ class PrimitiveEnv(EnvBase):
             out = execute(world, prim, self.offset, started=self.planned[a] is not None)
             self.sim_time += out.sim_time_s
             valid, outcome = out.reason != "infeasible", out.reason
-            self.dropped = out.reason in ("lost_contact", "unstable")
-            if out.ok and action.kind in ("flip", "release", "land"):
+            self.dropped = out.dropped  # from the simulated state, whatever the primitive says
+            if out.reached and action.kind in ("flip", "release", "land"):
                 self.contacts = prim.result
-            pose, q = self.world.object_pose(), self.world.joint_q()
-            self.contacts = self.model.measured(self.contacts, pose, q)
             if out.ok and action.kind == "flip":
                 # paid once per posture and episode: flipping back and forth earns nothing
                 fresh = self.contacts.posture not in self.postures
                 self.postures.add(self.contacts.posture)
-                useful = fresh and flip_useful(self.model, self.contacts, action.finger, pose,
-                                               self.goal)
+                pose, q = self.world.object_pose(), self.world.joint_q()
+                useful = fresh and flip_useful(self.model, self.model.measured(
+                    self.contacts, pose, q), action.finger, pose, self.goal)
         self.n_invalid += not valid
         self.n_actions += 1
         after = self.world.object_pose()

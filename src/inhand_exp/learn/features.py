@@ -5,8 +5,8 @@ error ``X_g - X_t`` (angle wrapped) is appended, since every action is judged by
 that error. Floats past the paper's 18 (extras) pass through unscaled.
 
 With a ``HandGeometry`` the features also place each fingertip on the object: forward kinematics
-of ``q`` in the frame of ``X_t`` gives, per finger, its coordinate along the object's long axis
-and its offset across it (which face it is on). Which grasp holds the object decides which
+of ``q`` in the frame of ``X_t`` gives, per finger, its offset across the object's long axis
+(which side it is on) and its coordinate along it. Which grasp holds the object decides which
 primitives can move it where, and an MLP would otherwise have to learn the kinematics from
 joint angles. With ``n_actions`` the feasibility mask is appended too. All of these are
 functions of what the environment returns; the scales and the geometry are buffers, saved with
@@ -23,10 +23,10 @@ from torch import nn
 
 from inhand_exp.envs.specs import OBS_DIM
 
-POSE_CENTER = (0.0, 0.2, 0.0)  # the middle of the workspace (m, m, rad)
-POSE_SCALE = (0.05, 0.05, 0.5)
+POSE_CENTER = (0.0, 0.35, 0.0)  # the middle of the workspace (m, m, rad)
+POSE_SCALE = (0.05, 0.1, 1.0)
 ERROR_SCALE = (0.02, 0.02, 0.2)  # two repose steps
-TIP_SCALE = (0.25, 0.02)  # along (half a pole) and across (a tip outside a long face), m
+TIP_SCALE = (0.02, 0.25)  # across (a tip outside a long side) and along (half a pole), m
 
 
 @dataclass(frozen=True)

@@ -146,6 +146,8 @@ EVAL_EPISODE = _topic(
         "final_pose": _pose("Object pose at the end of the episode"),
         "final_err_m": _number("Position error between final and goal pose (m)."),
         "final_err_rad": _number("Absolute orientation error between final and goal pose (rad)."),
+        "needs_flip": _boolean("True when no grasp of the initial posture holds the object at "
+                               "the goal (the goal set's own flag)."),
         "object": _string("Name of the object config."),
         "perturb": _string("Name of the perturbation config."),
         "noise": _string("Name of the noise config."),
@@ -165,8 +167,9 @@ EPISODE_ACTION = _topic(
         "action": _integer("Index of the chosen primitive in the action set."),
         "name": _string("Name of the chosen primitive."),
         "valid": _boolean("False when the primitive was not applicable in the current state."),
-        "outcome": _string("How the primitive ended, e.g. done, lost_contact, infeasible, "
-                           "timeout."),
+        "outcome": _string("How the primitive ended: done, infeasible, lost_contact, "
+                           "unstable, timeout, link_contact (a link or the palm touched the "
+                           "object), rejected (by the filter) or none."),
         "pose_before": _pose("Object pose before the action"),
         "pose_after": _pose("Object pose after the action"),
         "sim_time_s": _number("Simulated time since the episode start when the action ended "

@@ -63,14 +63,14 @@ SLIDER_MASS = 1e-5
 def object_urdf(length: float, width: float, depth: float, mass: float) -> str:
     """A box on a world-fixed chain: prismatic x, prismatic z, revolute about -y.
 
-    Link indices: 0 x slider, 1 z slider, 2 the body (a uniform box, long axis along x at zero
-    angle). The sliders carry no collision shape and a negligible mass; the motors are left to
-    the caller to disable.
+    Link indices: 0 x slider, 1 z slider, 2 the body (a uniform box, long axis along z at zero
+    angle: a pole stands upright). The sliders carry no collision shape and a negligible mass;
+    the motors are left to the caller to disable.
     """
     tiny = _inertial(SLIDER_MASS, 0.0, 1e-9)
     iyy = mass * (length**2 + width**2) / 12
     body = (f'<link name="body">{_inertial(mass, 0.0, iyy, mass * (width**2 + depth**2) / 12)}'
-            f'<collision><geometry><box size="{length} {depth} {width}"/></geometry>'
+            f'<collision><geometry><box size="{width} {depth} {length}"/></geometry>'
             f'</collision></link>')
     links = [f'<link name="world">{_inertial(0.0, 0.0, 0.0)}</link>',
              f'<link name="x">{tiny}</link>', f'<link name="z">{tiny}</link>', body]
@@ -86,6 +86,14 @@ def object_urdf(length: float, width: float, depth: float, mass: float) -> str:
         f'<axis xyz="{_AXIS}"/><dynamics damping="0" friction="0"/></joint>',
     ]
     return _robot("object", links, joints)
+
+
+def palm_urdf(half_width: float, thickness: float, depth: float) -> str:
+    """A static plate whose top face is the base's origin: the palm the fingers rise from."""
+    return _robot("palm", [
+        f'<link name="plate">{_inertial(0.0, 0.0, 0.0)}<collision>'
+        f'<origin xyz="0 0 {-thickness / 2}"/><geometry><box size="{2 * half_width} {depth} '
+        f'{thickness}"/></geometry></collision></link>'], [])
 
 
 def _robot(name: str, links: list[str], joints: list[str]) -> str:

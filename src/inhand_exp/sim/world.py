@@ -1,10 +1,13 @@
 """The PyBullet world: three planar torque-controlled fingers and a planar object, with accessors.
 
-What collides: only the three spherical fingertips touch the object. The finger links are
-modelled as lying in parallel planes beside the object (as a real hand's fingers sit at different
-depths), so links pass beside the object and beside each other; fingers never touch one another.
-A fingertip, being in the object's plane, can never pass through the object to its other side:
-getting round it takes a flip.
+What collides: every part of the hand that a real hand would bring against the object. The
+fingertips, both links of every finger (capsules) and the palm plate (a static box whose top face
+is at the finger bases) all collide with the object. The fingers sit at different depths along y,
+as a real hand's do, so they pass beside one another and never touch; the palm does not touch
+the fingers mounted on it. Nothing of the hand can pass through the object: getting a finger to
+the object's other side takes a flip round one of its ends. Only fingertip contacts count as a
+grasp (``contacts``, ``grasp_lost``); a link or the palm touching the object is reported by
+``hand_contacts``.
 
 The object is a dynamic box on a world-fixed chain (prismatic x, prismatic z, revolute about -y)
 whose joint motors are disabled, so it moves only through contact forces and gravity. The
@@ -24,7 +27,7 @@ import numpy as np
 import pybullet as pb
 
 from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
-from inhand_exp.sim.urdf import finger_urdf, object_urdf
+from inhand_exp.sim.urdf import finger_urdf, object_urdf, palm_urdf
 
 TIP_LINK = 2  # link index of the fingertip in each finger
 BODY_LINK = 2  # link index of the object body in the object chain
@@ -32,7 +35,7 @@ BODY_LINK = 2  # link index of the object body in the object chain
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """Geometry and mass of a box-shaped object: long axis ``length_m`` along its local x."""
+    """Geometry and mass of a box-shaped object: long axis ``length_m`` along its local z."""
 
     length_m: float
     width_m: float
@@ -93,6 +96,11 @@ class World:
                             for i, x in enumerate(hand.finger_base_x_m)]
             self.object = self._load(Path(tmp) / "object.urdf", object_urdf(
                 obj.length_m, obj.width_m, obj.depth_m, obj.mass_kg), (0.0, 0.0, 0.0))
+            xs = hand.finger_base_x_m
+            half = (xs[-1] - xs[0]) / 2 + hand.palm_overhang_m
+            self.palm = self._load(Path(tmp) / "palm.urdf", palm_urdf(
+                half, hand.palm_thickness_m, 4 * obj.depth_m),
+                ((xs[0] + xs[-1]) / 2, 0.0, hand.base_z_m))
         self._setup_dynamics(hand, obj)
         self._steps = 0
         self.step_wall_s = 0.0  # wall time spent inside stepSimulation (benchmarks)
@@ -116,12 +124,16 @@ class World:
         pb.changeDynamics(self.object, BODY_LINK, lateralFriction=obj.friction,
                           spinningFriction=0.0, rollingFriction=0.0, restitution=0.0,
                           physicsClientId=cid)
+        pb.changeDynamics(self.palm, -1, lateralFriction=hand.friction, restitution=0.0,
+                          physicsClientId=cid)
+        for link in (-1, 0, 1):  # the sliders are not part of the object's shape
+            pb.setCollisionFilterPair(self.object, self.palm, link, -1, 0, physicsClientId=cid)
         for f in self.fingers:
-            pb.changeDynamics(f, TIP_LINK, lateralFriction=hand.friction, spinningFriction=0.0,
-                              rollingFriction=0.0, restitution=0.0, physicsClientId=cid)
-            for link in (0, 1):  # links lie in planes beside the object
-                pb.setCollisionFilterPair(self.object, f, BODY_LINK, link, 0,
-                                          physicsClientId=cid)
+            for link in (0, 1, TIP_LINK):
+                pb.changeDynamics(f, link, lateralFriction=hand.friction, spinningFriction=0.0,
+                                  rollingFriction=0.0, restitution=0.0, physicsClientId=cid)
+            for link in range(-1, 3):  # fingers are mounted on the palm
+                pb.setCollisionFilterPair(self.palm, f, -1, link, 0, physicsClientId=cid)
             for g in self.fingers:
                 if g > f:
                     for a in range(-1, 3):
@@ -207,6 +219,19 @@ class World:
             out.append(Contact(self.fingers.index(finger), np.array([point[0], point[2]]),
                                normal, float(c[9]), float(tangent @ lateral[[0, 2]])))
         return out
+
+    def hand_contacts(self) -> list[str]:
+        """Parts of the hand other than the fingertips touching the object, as names
+        (``finger 1 distal``, ``palm``): contacts the controllers did not plan."""
+        out = []
+        names = {0: "proximal", 1: "distal"}
+        for c in pb.getContactPoints(bodyA=self.object, physicsClientId=self._cid):
+            b, link_b = c[2], c[4]
+            if b == self.palm:
+                out.append("palm")
+            elif b in self.fingers and link_b in names:
+                out.append(f"finger {self.fingers.index(b)} {names[link_b]}")
+        return sorted(set(out))
 
     def grasp_lost(self) -> str | None:
         """Why the object is not held, judged from PyBullet's contact points, or None if held.

@@ -1,16 +1,25 @@
 """Goal datasets (paper section IV-B): (X0, Xg) pairs in three groups, deterministic from a seed.
 
-- easy: Xg is reachable by reposing alone from the initial contacts (every pose on the straight
-  path from X0 to Xg is reachable with those contacts and the grasp holds);
-- medium: Xg is reachable with the same posture (which face each finger is on) and other
-  contact coordinates, so sliding may be needed;
-- hard: Xg is reachable with some grasp of any posture, so some goals need a flip.
+X0 is a pose of the workspace with a random grasp that holds it. Then:
 
-Pair ``i`` of a split is drawn from its own generator seeded by (seed, group, split, i), so a set
-does not depend on how many pairs are drawn or in what order, and the test set (split "test")
-never overlaps the training distribution (split "train") by construction of the streams.
-Feasibility uses the controllers' own model (inverse kinematics within the joint limits and a
-squeeze strictly inside the friction cones), as the feasibility filter does.
+- easy: Xg is reachable by reposing alone from the initial contacts (every pose on the straight
+  path from X0 to Xg is held by those contacts, links clear);
+- medium: Xg is held by some grasp of the initial posture (which side each finger is on), with
+  other contact coordinates, so sliding may be needed;
+- hard: Xg is any pose of the workspace that some grasp holds (``hard_goal_posture="any"``, the
+  default: arbitrary pairs, as the paper says); with ``other``, a grasp of another posture than
+  X0's must hold it, as the authors' own code drew its hard goals.
+
+X0 and Xg are drawn uniformly from the part of the workspace the hand holds
+(``sample.random_grasp``), so poses only one posture holds (large tilts) are as likely as the
+upright ones every posture holds.
+
+Every pair carries ``needs_flip``: no grasp of the initial posture holds the object at Xg, by
+the controllers' own model (``sample.grasp_of``: reach, joint limits, links and palm clear, a
+squeeze strictly inside the friction cones). Pair ``i`` of a split is drawn from its own
+generator seeded by (seed, group, split, i), so a set does not depend on how many pairs are
+drawn or in what order, and the test set (split "test") never overlaps the training
+distribution (split "train") by construction of the streams.
 """
 
 from __future__ import annotations
@@ -23,14 +32,15 @@ import pandas as pd
 
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.repose import Gains, strict_hold
-from inhand_exp.control.sample import POSE_HIGH, POSE_LOW, random_grasp
+from inhand_exp.control.sample import Workspace, grasp_of, holds_at, random_grasp
 
 GROUPS = ("easy", "medium", "hard")
 SPLITS = ("train", "test")
 COLUMNS = ("group", "x0_x", "x0_z", "x0_theta", "xg_x", "xg_z", "xg_theta",
            "faces", "c0", "c1", "c2")
+OPTIONAL = ("needs_flip",)  # computed when a file lacks it
 EASY_STEP = np.array([0.06, 0.06, 0.6])  # largest easy offset (m, m, rad)
+HARD_POSTURES = ("any", "other")
 
 
 class GoalsError(ValueError):
@@ -39,22 +49,24 @@ class GoalsError(ValueError):
 
 @dataclass(frozen=True)
 class GoalPair:
-    """An initial pose and grasp, and a goal pose (m, m, rad)."""
+    """An initial pose and grasp, and a goal pose (m, m, rad); ``needs_flip``: no grasp of the
+    initial posture holds the object at the goal."""
 
     group: str
     x0: np.ndarray
     xg: np.ndarray
     contacts: Contacts
+    needs_flip: bool = False
 
 
 def reachable(model: HandModel, contacts: Contacts, pose: np.ndarray) -> bool:
-    """The grasp ``contacts`` can hold the object at ``pose`` (IK within limits, squeeze)."""
-    try:
-        q = model.grasp_q(contacts, pose)
-    except GeometryError:
-        return False
-    return all(f.within_limits(q[2 * i:2 * i + 2], margin=0.05)
-               for i, f in enumerate(model.fingers))
+    """The grasp ``contacts`` can hold the object at ``pose`` (IK within limits, links clear)."""
+    return holds_at(model, contacts, pose) is not None
+
+
+def needs_flip(model: HandModel, posture: Posture, xg: np.ndarray) -> bool:
+    """No grasp of ``posture`` holds the object at ``xg`` (a deterministic search)."""
+    return grasp_of(model, posture, xg) is None
 
 
 def _apart(x0: np.ndarray, xg: np.ndarray, tol: tuple[float, float]) -> bool:
@@ -63,43 +75,52 @@ def _apart(x0: np.ndarray, xg: np.ndarray, tol: tuple[float, float]) -> bool:
                 or abs(xg[2] - x0[2]) >= tol[1])
 
 
+def _inside(ws: Workspace, pose: np.ndarray) -> bool:
+    return bool(np.all(pose >= np.array(ws.low)) and np.all(pose <= np.array(ws.high)))
+
+
 def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
+                workspace: Workspace | None = None, hard_posture: str = "any",
                 tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500) -> GoalPair:
     """One pair of ``group``, by rejection sampling."""
     if group not in GROUPS:
         raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
+    if hard_posture not in HARD_POSTURES:
+        raise ValueError(f"hard_posture must be one of {HARD_POSTURES}, got {hard_posture!r}")
+    ws = workspace or Workspace()
     for _ in range(max_tries):
-        x0, c0, _ = random_grasp(model, rng)
+        x0, c0, _ = random_grasp(model, rng, ws)
         if group == "easy":
             xg = x0 + rng.uniform(-EASY_STEP, EASY_STEP)
             path = [x0 + (xg - x0) * s for s in np.linspace(0.2, 1.0, 5)]
-            ok = all(reachable(model, c0, p) for p in path)
+            ok = _inside(ws, xg) and all(reachable(model, c0, p) for p in path)
         elif group == "medium":
-            xg = rng.uniform(POSE_LOW, POSE_HIGH)
-            half = model.shape.length_m / 2 - 3 * model.tip_radius
-            coords = tuple(float(c) for c in rng.uniform(-half, half, 3))
-            cg = Contacts(c0.posture, coords)
-            ok = strict_hold(model, cg, Gains()) and reachable(model, cg, xg)
+            xg = ws.draw(rng)
+            ok = grasp_of(model, c0.posture, xg, rng, tries=8) is not None
         else:
-            xg, _, _ = random_grasp(model, rng)
+            exclude = c0.posture if hard_posture == "other" else None
+            xg, _, _ = random_grasp(model, rng, ws, exclude=exclude)
             ok = True
         if ok and _apart(x0, xg, tol):
-            return GoalPair(group, x0, xg, c0)
+            flip = group == "hard" and needs_flip(model, c0.posture, xg)
+            return GoalPair(group, x0, xg, c0, flip)
     raise GeometryError(f"no {group} goal pair found in {max_tries} tries")
 
 
-def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test"
-             ) -> list[GoalPair]:
+def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test",
+             workspace: Workspace | None = None, hard_posture: str = "any") -> list[GoalPair]:
     """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i)."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     g, s = GROUPS.index(group), SPLITS.index(split)
-    return [sample_pair(model, group, np.random.default_rng([seed, g, s, i])) for i in range(n)]
+    return [sample_pair(model, group, np.random.default_rng([seed, g, s, i]), workspace,
+                        hard_posture) for i in range(n)]
 
 
 def to_frame(pairs: list[GoalPair]) -> pd.DataFrame:
-    rows = [(p.group, *p.x0, *p.xg, str(p.contacts.posture), *p.contacts.coords) for p in pairs]
-    return pd.DataFrame(rows, columns=list(COLUMNS))
+    rows = [(p.group, *p.x0, *p.xg, str(p.contacts.posture), *p.contacts.coords, p.needs_flip)
+            for p in pairs]
+    return pd.DataFrame(rows, columns=[*COLUMNS, *OPTIONAL])
 
 
 def save_goals(pairs: list[GoalPair], path: str | Path) -> Path:
@@ -111,9 +132,19 @@ def save_goals(pairs: list[GoalPair], path: str | Path) -> Path:
     return path
 
 
-def load_goals(path: str | Path) -> list[GoalPair]:
+def _flag(v) -> bool | None:
+    """A boolean cell as pandas reads it (bool, 0/1 or the words), or None."""
+    if isinstance(v, bool | np.bool_):
+        return bool(v)
+    if isinstance(v, int | float | np.integer | np.floating) and v in (0, 1):
+        return bool(v)
+    return {"true": True, "false": False}.get(str(v).strip().lower())
+
+
+def load_goals(path: str | Path, model: HandModel | None = None) -> list[GoalPair]:
     """Read a goal set, CSV (as ``save_goals`` writes) or Parquet with the same columns; errors
-    name the row and column."""
+    name the row and column. ``needs_flip`` is optional; where a file lacks it, it is computed
+    with ``model`` (False without one)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"goal file {path} not found")
@@ -149,6 +180,14 @@ def load_goals(path: str | Path) -> list[GoalPair]:
             raise GoalsError(f"{path} {where} {row}: faces must be three of "
                              f"{sorted(faces_by_name)} joined by '/', got {r.faces!r}")
         posture = Posture(tuple(faces_by_name[n] for n in names))
-        pairs.append(GoalPair(r.group, np.array(values[0:3]), np.array(values[3:6]),
-                              Contacts(posture, tuple(values[6:9]))))
+        xg = np.array(values[3:6])
+        if "needs_flip" in df.columns:
+            flip = _flag(r.needs_flip)
+            if flip is None:
+                raise GoalsError(f"{path} {where} {row}: needs_flip must be true or false, got "
+                                 f"{r.needs_flip!r}")
+        else:
+            flip = model is not None and needs_flip(model, posture, xg)
+        pairs.append(GoalPair(r.group, np.array(values[0:3]), xg,
+                              Contacts(posture, tuple(values[6:9])), flip))
     return pairs

@@ -1,0 +1,71 @@
+"""Link clearance geometry and the flip's joint-space path planner."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from inhand_exp.config import HandConfig, ObjectConfig
+from inhand_exp.control.clearance import lowest_corner, segment_box_distance
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.joint_path import FreeSpace, JointPath, arrival_times, plan_joint_path
+
+
+@pytest.mark.parametrize(("seg", "expected"), [
+    ((-2.0, 0.0, 2.0, 0.0), 0.0),  # straight through the box
+    ((-2.0, 3.0, 2.0, 3.0), 2.0),  # parallel above the top face (hz = 1)
+    ((3.0, 0.0, 5.0, 0.0), 2.0),  # beside the right face (hx = 1), pointing away
+    ((2.0, 3.0, 4.0, 5.0), math.hypot(1.0, 2.0)),  # nearest to the corner (1, 1)
+    ((0.0, 3.0, 3.0, 0.0), 1.0 / math.sqrt(2.0)),  # diagonal: the corner (1, 1) to x + z = 3
+])
+def test_segment_box_distance(seg, expected):
+    assert segment_box_distance(*seg, 1.0, 1.0) == pytest.approx(expected)
+    ax, az, bx, bz = seg
+    assert segment_box_distance(bx, bz, ax, az, 1.0, 1.0) == pytest.approx(expected)
+
+
+def test_lowest_corner_of_a_tilted_pole():
+    assert lowest_corner(np.array([0.0, 0.3, 0.0]), 0.01, 0.25) == pytest.approx(0.05)
+    tilted = lowest_corner(np.array([0.0, 0.3, 0.5]), 0.01, 0.25)
+    assert tilted == pytest.approx(0.3 - 0.01 * math.sin(0.5) - 0.25 * math.cos(0.5))
+
+
+@pytest.fixture(scope="module")
+def model() -> HandModel:
+    return HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
+
+
+def test_joint_path_round_the_lower_end_stays_clear(model):
+    """Finger 0 from off the pole's left side to off its right side: the planner finds a way
+    under the lower end (changing elbow branch), and every point of it is clear."""
+    pose = np.array([0.0, 0.42, 0.0])
+    f = model.fingers[0]
+    start = f.ik(pose[:2] + np.array([-0.045, -0.19]), -1)  # off the left side, elbow out
+    goal = f.ik(pose[:2] + np.array([0.045, -0.19]), 1)  # off the right side, elbow under
+    space = FreeSpace(model, 0, pose, margin=0.005)
+    assert space.ok(start) and space.ok(goal)
+    way = plan_joint_path(space, start, goal)
+    assert way is not None and len(way) >= 3
+    np.testing.assert_array_equal(way[0], start)
+    np.testing.assert_array_equal(way[-1], goal)
+    assert np.sign(way[0][1]) != np.sign(way[-1][1])  # through the straight finger
+    for a, b in zip(way, way[1:], strict=False):
+        for s in np.linspace(0, 1, 40):
+            q = a + (b - a) * s
+            assert model.finger_gap(0, q, pose) >= 0.005 - 1e-9
+    path = JointPath(way, arrival_times(way, 0.0, 1.0))
+    q_end, qd_end, _ = path.reference(1.0)
+    np.testing.assert_allclose(q_end, goal)
+    np.testing.assert_allclose(qd_end, 0.0)
+
+
+def test_no_path_when_the_pole_is_too_low(model):
+    pose = np.array([0.0, 0.30, 0.0])  # lower end 5 cm above the palm: no finger passes
+    f = model.fingers[0]
+    start = f.ik(pose[:2] + np.array([-0.045, -0.19]), -1)
+    goal = f.ik(pose[:2] + np.array([0.045, -0.12]), 1)
+    space = FreeSpace(model, 0, pose, margin=0.005)
+    assert space.ok(start) and space.ok(goal)  # both ends are clear on their own
+    assert plan_joint_path(space, start, goal) is None

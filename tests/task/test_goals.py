@@ -77,6 +77,9 @@ def test_save_load_round_trip_and_no_overwrite(model, tmp_path):
     np.testing.assert_allclose([p.xg for p in back], [p.xg for p in pairs], atol=1e-8)
     np.testing.assert_allclose([p.contacts.coords for p in back],
                                [p.contacts.coords for p in pairs], atol=1e-8)
+    old = tmp_path / "without_flag.csv"  # a file without the column: the flag is recomputed
+    to_frame(pairs).drop(columns=["needs_flip"]).to_csv(old, index=False)
+    assert [p.needs_flip for p in load_goals(old, model)] == [p.needs_flip for p in pairs]
     before = path.read_bytes()
     with pytest.raises(FileExistsError, match="never overwritten"):
         save_goals(pairs, path)

@@ -30,7 +30,7 @@ from inhand_exp.config import ConfigError, PerturbConfig, validate
 
 # Trials per section when --trials is not given: the targets of the physics milestone.
 DEFAULT_TRIALS = {"hold": 100, "repose": 1000, "slide": 500, "flip_left": 200,
-                  "flip_right": 200, "flip_left_tilted": 100, "flip_right_tilted": 100,
+                  "flip_right": 200, "flip_left_tilted": 10, "flip_right_tilted": 10,
                   "perturbed": 200, "release": 200, "land": 200}
 TILTED_RAD = 1.0  # the flip_*_tilted sections start from |theta| >= this
 PERTURBATIONS = {"heavier": dict(mass_scale=1.1), "lighter": dict(mass_scale=0.9),

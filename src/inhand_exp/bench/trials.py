@@ -67,14 +67,14 @@ class Bench:
                       "dtheta": prim.repose_dtheta_rad, "slide": prim.slide_dc_m}
 
     def start(self, rng: np.random.Generator, pinch: int | None = None,
-              workspace: Workspace | None = None) -> Contacts:
+              workspace: Workspace | None = None, tries: int = 4000) -> Contacts:
         """Reset the world at a random valid grasp of the simulated object; with ``pinch``, one
         where the other two fingers could hold it alone (``sample.pinch_grasp``)."""
         ws = workspace or self.workspace
         if pinch is None:
             pose, contacts, q = random_grasp(self.true_model, rng, ws)
         else:
-            pose, contacts, q = pinch_grasp(self.true_model, rng, pinch, ws)
+            pose, contacts, q = pinch_grasp(self.true_model, rng, pinch, ws, max_tries=tries)
         self.world.reset(pose, q)
         return contacts
 
@@ -173,17 +173,20 @@ def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
 def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 200,
          min_tilt: float = 0.0) -> Trial | None:
     """A flip of ``finger`` from a random pinch grasp (tilted at least ``min_tilt`` rad from
-    upright, to either side) where the flip's own check allows it."""
-    ws = b.workspace
+    upright, to either side) where the flip's own check allows it. Tilted pinches are rare
+    and their flips rarer: that search is cut to 20 grasps of at most 100 draws each."""
+    ws, tries = b.workspace, 4000
+    if min_tilt > 0:
+        max_grasps, tries = min(max_grasps, 20), 100
     for _ in range(max_grasps):
         if min_tilt > 0:
             side = 1 if rng.random() < 0.5 else -1
             lo, hi = sorted((side * min_tilt, side * max(abs(ws.low[2]), abs(ws.high[2]))))
             ws = Workspace((ws.low[0], ws.low[1], lo), (ws.high[0], ws.high[1], hi))
         try:
-            contacts = b.start(rng, pinch=finger, workspace=ws)
-        except GeometryError:  # no pinch grasp at all in this part of the workspace
-            return None
+            contacts = b.start(rng, pinch=finger, workspace=ws, tries=tries)
+        except GeometryError:  # no pinch grasp found in this part of the workspace
+            continue
         prim = Flip(b.model, contacts, finger, b.durations["flip"], b.gains)
         if _feasible(prim, b.observe()):
             break

@@ -70,6 +70,7 @@ class Slide:
         drag = model.mu * float(np.sign(self.dc) * (self.along_O @ t_O))
         self.plan = plan_for(model, c, obs, self.gains, sliding=i, drag=drag)
         self.rest = plan_for(model, c, obs, self.gains, sliding=i)
+        self.hold = plan_for(model, c, obs, self.gains)  # the fallback of a step
         _, w_O = object_wrench(model, self.gains, obs.pose, np.zeros(3),
                                (obs.pose, np.zeros(3), np.zeros(3)))
         lam = self.plan.squeeze.solve(w_O)
@@ -99,13 +100,19 @@ class Slide:
         zero = np.zeros(3)
         acc, w_O = object_wrench(model, self.gains, obs.pose, obs.twist, (self.origin, zero, zero))
         lam = plan.squeeze.solve(w_O)
+        sliding = True
+        if lam is None:
+            # the drag cannot be balanced this step: every finger holds, the sliding one with
+            # static friction too, and the slide goes on at the next step
+            plan, sliding = self.hold, False
+            lam = plan.squeeze.solve(w_O)
         if lam is None:
             return None
         R = rotation(obs.pose[2])
         tau = np.zeros(6)
         for k, j in enumerate(plan.fingers):
             f_W, n_W = contact_force(plan, lam, k, R), R @ plan.normals_O[k]
-            if j == i:
+            if j == i and sliding:
                 qdd = self._slide_qdd(obs, R, acc)
             else:
                 qdd = follow_qdd(model, j, obs.q, obs.qd, plan.tips_O[k], acc, obs.twist[2], R)

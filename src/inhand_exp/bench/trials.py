@@ -113,8 +113,7 @@ def hold(b: Bench, rng: np.random.Generator) -> Trial:
                   b.offset(rng))
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and em <= HOLD_TOL[0] and er <= HOLD_TOL[1]
-    return Trial(ok, not out.ok and out.reason != "infeasible", em, er, out.sim_time_s,
-                 time.perf_counter() - t)
+    return Trial(ok, out.dropped, em, er, out.sim_time_s, time.perf_counter() - t)
 
 
 def _unit_reposes(b: Bench) -> list[np.ndarray]:
@@ -144,7 +143,7 @@ def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
     out = execute(b.world, prim, offset)
     em, er = _pose_error(b.world.object_pose(), start + delta)
     ok = out.ok and em <= REPOSE_TOL[0] and er <= REPOSE_TOL[1]
-    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+    return Trial(ok, out.dropped, em, er, out.sim_time_s,
                  time.perf_counter() - t)
 
 
@@ -166,7 +165,7 @@ def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
     err = abs(float(moved[finger]) - sign * dc)
     in_contact = finger in b.faces()
     ok = out.ok and err <= SLIDE_TOL_M and in_contact
-    return Trial(ok, out.reason in ("lost_contact", "unstable"), err, 0.0, out.sim_time_s,
+    return Trial(ok, out.dropped, err, 0.0, out.sim_time_s,
                  time.perf_counter() - t)
 
 
@@ -199,7 +198,7 @@ def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 200,
     after = b.faces()
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and len(after) == 3 and after.get(finger, before) == -before
-    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+    return Trial(ok, out.dropped, em, er, out.sim_time_s,
                  time.perf_counter() - t)
 
 
@@ -225,7 +224,7 @@ def release(b: Bench, rng: np.random.Generator) -> Trial | None:
     touching = set(b.faces())
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and finger not in touching and len(touching) == 2
-    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+    return Trial(ok, out.dropped, em, er, out.sim_time_s,
                  time.perf_counter() - t)
 
 
@@ -243,5 +242,5 @@ def land(b: Bench, rng: np.random.Generator) -> Trial | None:
     out = execute(b.world, prim, b.offset(rng))
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and len(b.faces()) == 3
-    return Trial(ok, out.reason in ("lost_contact", "unstable"), em, er, out.sim_time_s,
+    return Trial(ok, out.dropped, em, er, out.sim_time_s,
                  time.perf_counter() - t)

@@ -139,10 +139,10 @@ class GoalsConfig:
     test_pairs: int = spec(500, "Test (X0, Xg) pairs in the group.", gt=0)
     train_pairs: int = spec(20000, "Training pairs, drawn apart from the test set.", gt=0)
     seed: int = spec(1234, "Seed of the dataset, the same for every learner.", ge=0)
-    hard_goal_posture: str = spec("any", "Hard goals are arbitrary poses the hand holds (any, "
-                                  "as the paper says) or poses held by a grasp of another "
+    hard_goal_posture: str = spec("other", "Hard goals are poses held by a grasp of another "
                                   "posture than the start's (other, as the authors' code drew "
-                                  "them).", choices=("any", "other"))
+                                  "them; arbitrary pairs need a flip too rarely) or any pose "
+                                  "the hand holds (any).", choices=("other", "any"))
     train_groups: list[str] = spec([], "Groups the training episodes are drawn from, "
                                    "uniformly; empty: this group only.",
                                    choices=("easy", "medium", "hard"))

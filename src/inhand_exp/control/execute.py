@@ -147,6 +147,9 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
                 bad = state_check(pose, twist, q, qd)
                 if bad is not None:
                     return Outcome(False, "unstable", bad, k * world.dt, k)
+                lost = fell(pose)
+                if lost is not None:
+                    return Outcome(False, "lost_contact", lost, k * world.dt, k)
         tau = primitive.torques(Observation(q, qd, pose + offset, twist, k * world.dt))
         if tau is None:
             return _safe_stop(world, q, k, fell, state_check, settle_s, check_every)
@@ -156,9 +159,6 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
         touched.update(world.hand_contacts())
         lost = world.grasp_lost()
         if lost is None:
-            lost = fell(world.object_state()[0])
-            if lost is not None:
-                return Outcome(False, "lost_contact", lost, (k + 1) * world.dt, k + 1)
             lost_since = None
         elif lost_since is None:
             lost_since = k * world.dt

@@ -173,9 +173,8 @@ class Flip:
             return None
         lo, hi = span[0] - SPAN_TOL_M, span[1] + SPAN_TOL_M
         q0 = obs.q[2 * i:2 * i + 2].copy()
-        inward, along = face_axes(face)
-        k = self.full.fingers.index(i)
-        lift_O = self.full.tips_O[k] - self.clearance * inward
+        inward, _ = face_axes(face)
+        lift_O = self.full.tips_O[self.full.fingers.index(i)] - self.clearance * inward
         q_lift = self._ik_clear(lift_O, pose, R, model.clearance, prefer=self.elbow)
         if q_lift is None:
             return None
@@ -184,7 +183,7 @@ class Flip:
             return None
         hx, hz = shape.half_x, shape.half_z
         tries = 0
-        for coord in sorted((k * step_m for k in range(-n, n + 1)), key=lambda c: abs(c - here)):
+        for coord in sorted((j * step_m for j in range(-n, n + 1)), key=lambda c: abs(c - here)):
             if not lo <= coord <= hi:
                 continue
             q_touch = self._ik_clear(hover(hx, hz, new_face, coord, r - self.press), pose, R,

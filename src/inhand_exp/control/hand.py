@@ -87,8 +87,8 @@ class HandModel:
             if not branches:
                 raise GeometryError(f"finger {i} cannot reach its contact at "
                                     f"({target[0]:.3f}, {target[1]:.3f}) m")
-            gap, qi = max(((self.finger_gap(i, qi, pose), k, qi)
-                           for k, qi in enumerate(branches)), key=lambda g: g[:2])[::2]
+            gap, qi = max(((self.finger_gap(i, b, pose), b) for b in branches),
+                          key=lambda g: g[0])
             if gap < self.clearance:
                 raise GeometryError(f"finger {i}'s links would cut into the object or the palm "
                                     f"to reach its contact ({gap * 1e3:.1f} mm)")

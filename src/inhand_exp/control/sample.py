@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from inhand_exp.control.grasp import Contacts, Face, Posture
+from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import GeometryError, HandModel
 from inhand_exp.control.repose import Gains, strict_hold
 
@@ -35,45 +35,9 @@ class Workspace:
         return rng.uniform(self.low, self.high)
 
 
-def lone_between(rng: np.random.Generator, half: float, gap: float = 0.06
-                 ) -> tuple[Posture, tuple[float, float, float]]:
-    """A pole posture with a lone finger between the other two along the pole, on the opposite
-    long side (a three-point bend)."""
-    lone = int(rng.integers(3))
-    side = Face.LEFT if rng.random() < 0.5 else Face.RIGHT
-    other = Face.RIGHT if side == Face.LEFT else Face.LEFT
-    a = rng.uniform(-half, half - 2 * gap)
-    b = rng.uniform(a + 2 * gap, half)
-    mid = rng.uniform(a + gap / 2, b - gap / 2)
-    pair = sorted((a, b)) if rng.random() < 0.5 else sorted((a, b), reverse=True)
-    faces, coords = [other] * 3, [0.0] * 3
-    faces[lone], coords[lone] = side, mid
-    rest = [i for i in range(3) if i != lone]
-    for i, c in zip(rest, pair, strict=True):
-        coords[i] = c
-    return Posture(tuple(faces)), tuple(coords)
-
-
-def any_faces(rng: np.random.Generator, half_long: float, half_short: float
-              ) -> tuple[Posture, tuple[float, float, float]]:
-    """A box posture with every finger on a random face at a random coordinate."""
-    faces = tuple(Face(int(f)) for f in rng.integers(4, size=3))
-    coords = tuple(float(rng.uniform(-h, h)) for h in
-                   (half_short if f in (Face.TOP, Face.BOTTOM) else half_long for f in faces))
-    return Posture(faces), coords
-
-
 def elongated(model: HandModel) -> bool:
     """True for a pole-like object: its grasps use the two long faces only."""
     return model.shape.length_m > 2 * model.shape.width_m
-
-
-def grasp_contacts(model: HandModel, rng: np.random.Generator) -> Contacts:
-    """Random contacts of the object's kind of grasp (not yet checked)."""
-    r = model.tip_radius
-    if elongated(model):
-        return Contacts(*lone_between(rng, model.shape.half_z - 3 * r))
-    return Contacts(*any_faces(rng, model.shape.half_z - 2 * r, model.shape.half_x - 2 * r))
 
 
 def holds_at(model: HandModel, contacts: Contacts, pose: np.ndarray, press: float = 0.0,
@@ -97,12 +61,12 @@ def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
     object at ``pose``: reach, joint limits with ``margin`` and links clear."""
     r = model.tip_radius
     n = int((model.shape.half_extent(face) - 2 * r) // step_m)
-    probe = Contacts(Posture((face,) * 3), (0.0, 0.0, 0.0))
+    R, f = rotation(pose[2]), model.fingers[finger]
     out = []
     for k in range(-n, n + 1):
         c = k * step_m
-        target = model.tip_targets(probe.moved(0, coord=c), pose)[0]
-        f = model.fingers[finger]
+        point, inward = model.shape.local_contact(face, c)
+        target = pose[:2] + R @ (point - r * inward)
         for elbow in (1, -1):
             qi = f.ik(target, elbow)
             if (qi is not None and f.within_limits(qi, margin)

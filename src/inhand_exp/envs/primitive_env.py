@@ -23,7 +23,7 @@ from torchrl.data import Binary, Categorical, Unbounded
 from torchrl.envs import EnvBase
 
 from inhand_exp.config import ObjectConfig, PerturbConfig
-from inhand_exp.control.execute import Observation, execute
+from inhand_exp.control.execute import REASONS, Observation, execute
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import Gains
 from inhand_exp.control.sample import Workspace
@@ -36,8 +36,7 @@ from inhand_exp.task.rules import Rules, flip_useful, reached, reward, to_go
 
 PRESS_M = 0.0005  # initial fingertip press into the surface (m)
 # how the last action ended: an execute() reason, "rejected" by the filter, or "none" (reset)
-OUTCOMES = ("none", "done", "infeasible", "lost_contact", "unstable", "timeout", "rejected",
-            "link_contact")
+OUTCOMES = ("none", *REASONS, "rejected")
 
 
 def _object_config(node) -> ObjectConfig:

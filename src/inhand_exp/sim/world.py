@@ -103,6 +103,7 @@ class World:
                 ((xs[0] + xs[-1]) / 2, 0.0, hand.base_z_m))
         self._setup_dynamics(hand, obj)
         self._steps = 0
+        self._stamp, self._points_at, self._cache = 0, -1, ()  # see _points
         self.step_wall_s = 0.0  # wall time spent inside stepSimulation (benchmarks)
 
     def _load(self, path: Path, text: str, base: tuple[float, float, float]) -> int:
@@ -153,6 +154,7 @@ class World:
         # contact queries must describe the new state, not the manifold of the last step
         pb.performCollisionDetection(physicsClientId=cid)
         self._steps = 0
+        self._stamp += 1  # the contact points describe a new state
 
     @property
     def time_s(self) -> float:
@@ -203,7 +205,7 @@ class World:
         """
         out = []
         obj = self.object
-        for c in pb.getContactPoints(physicsClientId=self._cid):
+        for c in self._points():
             a, b, link_a, link_b = c[1], c[2], c[3], c[4]
             if a == obj and link_a == BODY_LINK and b in self.fingers and link_b == TIP_LINK:
                 sign, finger, point = 1.0, b, c[5]
@@ -220,13 +222,26 @@ class World:
                                normal, float(c[9]), float(tangent @ lateral[[0, 2]])))
         return out
 
+    def _points(self) -> tuple:
+        """PyBullet's contact points, queried once per simulated state (``contacts``,
+        ``hand_contacts`` and ``grasp_lost`` all read them after a step)."""
+        if self._points_at != self._stamp:
+            self._cache = pb.getContactPoints(physicsClientId=self._cid)
+            self._points_at = self._stamp
+        return self._cache
+
     def hand_contacts(self) -> list[str]:
         """Parts of the hand other than the fingertips touching the object, as names
         (``finger 1 distal``, ``palm``): contacts the controllers did not plan."""
         out = []
         names = {0: "proximal", 1: "distal"}
-        for c in pb.getContactPoints(bodyA=self.object, physicsClientId=self._cid):
-            b, link_b = c[2], c[4]
+        for c in self._points():
+            if c[1] == self.object:
+                b, link_b = c[2], c[4]
+            elif c[2] == self.object:
+                b, link_b = c[1], c[3]
+            else:
+                continue
             if b == self.palm:
                 out.append("palm")
             elif b in self.fingers and link_b in names:
@@ -265,6 +280,7 @@ class World:
         pb.stepSimulation(physicsClientId=cid)
         self.step_wall_s += time.perf_counter() - t
         self._steps += 1
+        self._stamp += 1
 
     def close(self) -> None:
         if self._cid is not None and pb.isConnected(self._cid):

@@ -47,6 +47,21 @@ def test_speed_reports_rates_and_their_ratio(capsys):
     assert {"repose", "slide"} <= set(out["ms_per_primitive"])
 
 
+def test_env_reports_its_efficiency_from_the_steps_it_counted(capsys):
+    """The physics steps the worlds counted equal the simulated time over the timestep, and the
+    efficiency is their rate over the raw stepSimulation rate of as many processes."""
+    main(["env", "--steps", "3", "train.num_envs=2", "task.max_actions=2"])
+    out = last_json(capsys)
+    assert out["actions"] == 6 and out["workers"] == 1
+    assert out["sim_steps"] == round(out["sim_s_per_action"] * out["actions"]
+                                     / out["physics_dt_s"])
+    assert out["sim_steps_per_action"] * out["actions"] == pytest.approx(out["sim_steps"])
+    assert out["sim_steps_per_s"] == pytest.approx(out["sim_steps"] / out["wall_s"])
+    assert out["raw_steps_per_s"] == pytest.approx(out["raw_steps_per_core"] * out["workers"])
+    assert 0.0 < out["efficiency"] <= 1.0
+    assert out["efficiency"] == pytest.approx(out["sim_steps_per_s"] / out["raw_steps_per_s"])
+
+
 def test_bad_input_is_refused():
     with pytest.raises(SystemExit, match="2"):
         main(["primitives", "--trials", "0"])

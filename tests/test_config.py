@@ -122,7 +122,7 @@ def test_impossible_values_name_field_and_value(compose_cfg, override, message):
 
 @pytest.mark.parametrize(("overrides", "message"), [
     (["object=cube", "primitives=pole"], "primitives=pole does not fit object=cube"),
-    (["primitives.repose_duration_s=0.501"], "not a whole number of physics steps"),
+    (["primitives.repose_duration_s=0.501"], "not a whole number of control periods"),
     (["mode=eval"], "mode=eval needs checkpoint=PATH"),
     (["learner.frames_per_batch=100"],
      "learner.frames_per_batch=100 must be a multiple of train.num_envs=16"),

@@ -48,7 +48,10 @@ class EnvBackend(StrEnum):
 
 @dataclass
 class SimConfig:
-    timestep_s: float = spec(1 / 240, "Physics timestep (s); the torque law runs every step.", gt=0)
+    timestep_s: float = spec(1 / 240, "Physics timestep (s).", gt=0)
+    control_substeps: int = spec(2, "Physics steps per update of the torque law: its torques "
+                                 "are held for this many steps (1: the controllers run at the "
+                                 "physics rate).", ge=1)
     solver_iterations: int = spec(50, "PyBullet constraint-solver iterations per step.", gt=0)
     gravity_mps2: float = spec(9.81, "Gravity magnitude (m/s^2), pointing along -z.", ge=0)
 
@@ -124,6 +127,9 @@ class PrimitivesConfig:
     flip_duration_s: float = spec(2.0, "Simulated time given to one flip (s).", gt=0)
     release_duration_s: float = spec(1.0, "Simulated time given to one release (s).", gt=0)
     land_duration_s: float = spec(1.5, "Simulated time given to one land (s).", gt=0)
+    settle_early: bool = spec(True, "End a repose or slide once it is past its move, within "
+                              "its tolerance and at rest, instead of holding still for the "
+                              "rest of its duration.")
     kp: float = spec(400.0, "Object-pose PD stiffness (1/s^2).", ge=0)
     kd: float = spec(40.0, "Object-pose PD damping (1/s).", ge=0)
     min_normal_force_n: float = spec(0.5, "Least normal force at every held contact (N).", ge=0)
@@ -353,7 +359,7 @@ def _check_consistency(cfg: DictConfig) -> None:
         a, b = cfg.task[key]
         if not a < b:
             raise ConfigError(f"task.{key} must be [low, high] with low < high, got [{a}, {b}]")
-    dt = cfg.sim.timestep_s
+    dt = cfg.sim.timestep_s * cfg.sim.control_substeps
     durations = {f"primitives.{k}": cfg.primitives[k]
                  for k in ("repose_duration_s", "slide_duration_s", "flip_duration_s",
                            "release_duration_s", "land_duration_s")}
@@ -362,5 +368,6 @@ def _check_consistency(cfg: DictConfig) -> None:
     for key, duration in durations.items():
         steps = duration / dt
         if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
-            raise ConfigError(f"{key}={duration} is not a whole number of physics steps of "
-                              f"sim.timestep_s={dt} ({steps:.4f} steps)")
+            raise ConfigError(f"{key}={duration} is not a whole number of control periods of "
+                              f"sim.timestep_s x sim.control_substeps = {dt} s "
+                              f"({steps:.4f} periods)")

@@ -73,13 +73,18 @@ def _train(cfg, ppo: PPO, target: int, run_dir: Path, log: RunLog, say) -> None:
     start, frames0 = time.perf_counter(), ppo.frames
     bar = ProgressBar(target, "frames", start=frames0, enabled=cfg.log.progress)
 
+    spent = [0.0, 0.0]  # collecting, learning (s)
+
     def progress(iteration: int, m: dict[str, float]) -> None:
         wall = time.perf_counter() - start
         log.write("/train/iteration", {
             "iteration": iteration, "frames": int(m["frames"]), "wall_s": wall,
             "losses": {k: m[k] for k in ("loss_objective", "loss_critic", "loss_entropy")},
             "mean_return": m["mean_reward"], "success_rate": m["success_rate"],
-            "drop_rate": m["drop_rate"], "actions_per_s": bar.rate(int(m["frames"]))})
+            "drop_rate": m["drop_rate"], "actions_per_s": bar.rate(int(m["frames"])),
+            "collect_s": m["collect_s"], "learn_s": m["learn_s"]})
+        spent[0] += m["collect_s"]
+        spent[1] += m["learn_s"]
         log.flush()
         bar.update(int(m["frames"]), f"it {iteration}  success {m['success_rate']:5.1%}  "
                                      f"drops {m['drop_rate']:5.1%}")
@@ -92,8 +97,9 @@ def _train(cfg, ppo: PPO, target: int, run_dir: Path, log: RunLog, say) -> None:
         bar.close()
         if not env.is_closed:  # the collector closes it when it ends
             env.close()
-    say(f"policy saved to {run_dir / CHECKPOINT} ({ppo.frames} frames, "
-        f"{time.perf_counter() - start:.0f} s)")
+    wall = time.perf_counter() - start
+    say(f"policy saved to {run_dir / CHECKPOINT} ({ppo.frames} frames, {wall:.0f} s: "
+        f"collecting {spent[0]:.0f} s, learning {spent[1]:.0f} s = {spent[1] / wall:.1%})")
 
 
 def test_goals(cfg) -> list[GoalPair]:

@@ -8,7 +8,11 @@ import numpy as np
 import pytest
 
 from inhand_exp.config import HandConfig, ObjectConfig
-from inhand_exp.control.clearance import lowest_corner, segment_box_distance
+from inhand_exp.control.clearance import (
+    lowest_corner,
+    segment_box_distance,
+    segment_box_distances,
+)
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.joint_path import FreeSpace, JointPath, arrival_times, plan_joint_path
 
@@ -69,3 +73,26 @@ def test_no_path_when_the_pole_is_too_low(model):
     space = FreeSpace(model, 0, pose, margin=0.005)
     assert space.ok(start) and space.ok(goal)  # both ends are clear on their own
     assert plan_joint_path(space, start, goal) is None
+
+
+def test_vectorised_clearance_equals_the_scalar_reference(model):
+    """The numpy paths (a whole grid or segment at once) give the plain-float answers to 1e-9:
+    segment-box distances, link gaps (palm included) and the free-space test."""
+    rng = np.random.default_rng(5)
+    seg = rng.uniform(-3.0, 3.0, (4000, 4))
+    seg[::7, 2] = seg[::7, 0]  # vertical, horizontal and degenerate segments too
+    seg[::11, 3] = seg[::11, 1]
+    seg[::13, 2:] = seg[::13, :2]
+    many = segment_box_distances(*seg.T, 1.0, 0.5)
+    one = [segment_box_distance(*s, 1.0, 0.5) for s in seg]
+    np.testing.assert_allclose(many, one, rtol=0, atol=1e-9)
+    for i, f in enumerate(model.fingers):
+        pose = np.array([rng.uniform(-0.05, 0.05), rng.uniform(0.2, 0.5), rng.uniform(-1.5, 1.5)])
+        Q = rng.uniform(np.array(f.q_lower) - 0.3, np.array(f.q_upper) + 0.3, (2000, 2))
+        gaps = model.finger_gaps(i, Q, pose)
+        ref = np.array([model.finger_gap(i, q, pose) for q in Q])
+        assert np.array_equal(np.isinf(gaps), np.isinf(ref)) and np.isinf(ref).any()
+        np.testing.assert_allclose(gaps[np.isfinite(ref)], ref[np.isfinite(ref)], atol=1e-9)
+        space = FreeSpace(model, i, pose, margin=0.005)
+        assert space.ok_many(Q).tolist() == [space.ok(q) for q in Q]
+        assert space.grid.any() and not space.grid.all()

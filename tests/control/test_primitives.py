@@ -102,6 +102,9 @@ class LimpFinger:
     def achieved(self, obs) -> str | None:
         return self.inner.achieved(obs)
 
+    def settled(self, obs) -> bool:
+        return self.inner.settled(obs)
+
 
 # --- hold and repose --------------------------------------------------------------------------
 
@@ -140,6 +143,39 @@ def test_repose_sequence_of_20_random_unit_actions(nominal_model, make_world):
         dpos, dang = pose_error(world.object_pose(), start + delta)
         assert dpos < 2e-3 and dang < 0.02, (k, delta, dpos, dang)
     assert touching(world) == {0, 1, 2}
+
+
+@pytest.mark.parametrize("delta", UNIT_REPOSES, ids=REPOSE_IDS)
+def test_settling_early_ends_only_inside_the_tolerance(nominal_model, make_world, delta):
+    """With ``settle_early`` a repose ends once it is at rest within its tolerance, before its
+    duration, and the simulated pose there is within that tolerance."""
+    world = make_world(BEND, X0)
+    start = world.object_pose()
+    prim = Repose(nominal_model, BEND, delta, REPOSE_S)
+    out = execute(world, prim, settle_early=True)
+    assert out.reason == "done", out
+    assert prim.move_s / world.dt <= out.steps < round(REPOSE_S / world.dt)
+    assert out.sim_time_s == pytest.approx(out.steps * world.dt)
+    dpos, dang = pose_error(world.object_pose(), start + delta)
+    assert dpos <= prim.tol[0] and dang <= prim.tol[1], (dpos, dang)
+    assert np.hypot(*world.object_twist()[:2]) <= 0.005 + 1e-3
+
+
+@pytest.mark.parametrize(("finger", "dc"), [(0, SLIDE_DC), (1, -SLIDE_DC)], ids=["0+", "1-"])
+def test_a_settled_slide_ends_early_at_its_target(nominal_model, make_world, finger, dc):
+    world = make_world(BEND, X0)
+    c0 = contact_coords(world)
+    out = execute(world, Slide(nominal_model, BEND, finger, dc, SLIDE_S), settle_early=True)
+    assert out.reason == "done" and out.steps < round(SLIDE_S / world.dt), out
+    assert abs(contact_coords(world)[finger] - c0[finger] - dc) < 3e-3
+
+
+def test_a_sagging_pole_never_settles(nominal_model, make_world):
+    """A hold whose pose is lost runs its whole duration even when it may settle early."""
+    world = make_world(BEND, X0)
+    out = execute(world, LimpFinger(hold(nominal_model, BEND, 2.0), finger=2), settle_early=True)
+    assert not out.ok
+    assert out.reason == "lost_contact" or out.steps == round(2.0 / world.dt), out
 
 
 # --- slide ------------------------------------------------------------------------------------

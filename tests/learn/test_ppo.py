@@ -79,6 +79,8 @@ def test_ppo_runs_on_the_primitive_environment(compose_cfg):
     ppo.train(env, 16, progress=lambda i, m: seen.append(m))
     assert [m["frames"] for m in seen] == [8, 16]
     assert all(0.0 <= m["success_rate"] <= 1.0 and 0.0 <= m["drop_rate"] <= 1.0 for m in seen)
+    # the iteration's wall time split into collecting (the physics) and learning
+    assert all(m["collect_s"] > 0.0 and m["learn_s"] > 0.0 for m in seen)
 
 
 @pytest.mark.slow

@@ -13,7 +13,8 @@ from inhand_exp.control.hand import GeometryError, HandModel
 from inhand_exp.control.repose import Gains, GraspPlan, Repose, min_jerk, repose_torques
 from inhand_exp.sim.world import BODY_LINK, TIP_LINK, ObjectSpec, World
 
-SIM, HAND, OBJ = SimConfig(), HandConfig(), ObjectConfig()
+# one ``World.step`` is one physics step here: the tests check the integration step by step
+SIM, HAND, OBJ = SimConfig(control_substeps=1), HandConfig(), ObjectConfig()
 G_ACC = SIM.gravity_mps2
 # the upright pole held in a three-point bend: finger 2 alone on the right side, between the
 # other two along the pole; every link clear of it
@@ -266,7 +267,7 @@ def test_contact_forces_balance_an_external_push():
     """Held still while pushed up along the pole harder than its weight, the measured contact
     forces on the object must sum to the push reversed plus the weight: friction now has to
     pull the pole down, a check of every contact's tangential sign."""
-    sim, hand, obj = SimConfig(), HandConfig(), ObjectConfig()
+    sim, hand, obj = SIM, HAND, OBJ  # the push is applied at every physics step
     world = World(sim, hand, ObjectSpec.from_config(obj))
     model = HandModel.from_config(hand, obj, sim.gravity_mps2)
     contacts = Contacts(Posture((Face.LEFT, Face.LEFT, Face.RIGHT)), (-0.21, -0.09, -0.15))
@@ -296,3 +297,26 @@ def test_contact_forces_balance_an_external_push():
     # the net load is up the pole: each finger's tangential force pulls the pole down
     assert all(c.tangential_force * (c.tangent @ axis) < 0 for c in world.contacts())
     world.close()
+
+
+def test_control_substeps_hold_the_torque_for_every_physics_step():
+    """One step of a world with ``control_substeps=3`` is three physics steps with the same
+    torque: the same state, bit for bit, as three steps of a world that updates every step."""
+    coarse = World(SimConfig(control_substeps=3), HAND, ObjectSpec.from_config(OBJ))
+    fine = World(SimConfig(control_substeps=1), HAND, ObjectSpec.from_config(OBJ))
+    try:
+        tau = np.array([0.3, -0.2, 0.1, 0.25, -0.3, 0.2])
+        for w in (coarse, fine):
+            w.reset(FAR, Q_FREE)
+        assert coarse.dt == pytest.approx(3 * fine.dt)
+        for _ in range(5):
+            coarse.step(tau)
+            for _ in range(3):
+                fine.step(tau)
+        np.testing.assert_array_equal(coarse.joint_state()[0], fine.joint_state()[0])
+        np.testing.assert_array_equal(coarse.joint_state()[1], fine.joint_state()[1])
+        assert coarse.physics_steps == fine.physics_steps == 15
+        assert coarse.time_s == pytest.approx(fine.time_s)
+    finally:
+        coarse.close()
+        fine.close()

@@ -132,7 +132,8 @@ def _print_row(name: str, r: dict) -> None:
 # --- speed --------------------------------------------------------------------------------
 
 def hold_rates(cfg: DictConfig, seconds: float, seed: int) -> tuple[float, float]:
-    """(raw stepSimulation, full control loop) steps/s, measured in the same runs of a hold."""
+    """(raw stepSimulation, full control loop) physics steps/s, measured in the same runs of a
+    hold."""
     bench = trials.Bench(cfg)
     rng = np.random.default_rng(seed)
     world = bench.world
@@ -145,7 +146,7 @@ def hold_rates(cfg: DictConfig, seconds: float, seed: int) -> tuple[float, float
         t = time.perf_counter()
         out = trials.execute(world, prim)
         loop_wall += time.perf_counter() - t
-        loop_steps += out.steps
+        loop_steps += out.steps * world.substeps
         raw_wall += world.step_wall_s
     return loop_steps / raw_wall, loop_steps / loop_wall
 

@@ -1,8 +1,11 @@
 """Mid-level throughput: actions per second of the batched primitive environment.
 
 A uniformly random policy over the allowed actions drives ``train.num_envs`` environments in
-``workers`` processes (the training layout); the simulated time of the actions, over the wall
-time and the raw ``stepSimulation`` rate, tells how much of the machine the physics gets.
+``workers`` processes (the training layout). The efficiency figure is the physics steps the
+environments took per second (``sim_steps_per_s``, counted by the worlds themselves) over what
+the same number of processes would take calling bare ``stepSimulation`` (``raw_steps_per_s``,
+measured in this run, times the workers): the share of the machine the physics gets. The rest
+goes to the feasibility filter, the controllers' Python, TorchRL and the policy.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ from inhand_exp.envs.batched import batched_env, layout
 
 
 def env_throughput(cfg: DictConfig, workers: int, steps: int, seed: int,
-                   raw_steps_per_s: float) -> dict:
+                   raw_steps_per_core: float) -> dict:
+    """Drive the batch for ``steps`` batch steps; the figures as a dict (see the module)."""
     cfg.train.workers = workers
     used, per = layout(cfg)
     env = batched_env(cfg, seed)
@@ -29,24 +33,28 @@ def env_throughput(cfg: DictConfig, workers: int, steps: int, seed: int,
 
     try:
         td = env.reset()
-        actions, sim_s = 0, 0.0
+        actions, sim_s, sim_steps = 0, 0.0, 0
         start = time.perf_counter()
         for _ in range(steps):
-            before = td["sim_time_s"].clone()
+            before, counted = td["sim_time_s"].clone(), td["physics_steps"].clone()
             td, root = env.step_and_maybe_reset(random_allowed(td))
-            sim_s += float((td["next", "sim_time_s"] - before).sum())
+            sim_s += float((td["next", "sim_time_s"] - before).double().sum())
+            sim_steps += int((td["next", "physics_steps"] - counted).sum())
             actions += td.numel()
             td = root
         wall = time.perf_counter() - start
     finally:
         env.close()
-    physics = sim_s / cfg.sim.timestep_s / wall
+    raw = raw_steps_per_core * used
     out = {"workers": used, "envs_per_worker": per, "actions": actions, "wall_s": wall,
            "actions_per_s": actions / wall, "sim_s_per_action": sim_s / actions,
-           "physics_steps_per_s": physics, "raw_steps_per_s": raw_steps_per_s,
-           "ratio_per_worker": physics / used / raw_steps_per_s}
-    print(f"stepSimulation alone: {raw_steps_per_s:10.0f} steps/s (one process, same run)")
+           "sim_steps": sim_steps, "sim_steps_per_action": sim_steps / actions,
+           "sim_steps_per_s": sim_steps / wall, "raw_steps_per_core": raw_steps_per_core,
+           "raw_steps_per_s": raw, "efficiency": sim_steps / wall / raw,
+           "physics_dt_s": cfg.sim.timestep_s}
+    print(f"stepSimulation alone: {raw_steps_per_core:10.0f} steps/s per core (same run)")
     print(f"{used} worker(s) x {per} envs: {out['actions_per_s']:.1f} actions/s "
           f"({actions} actions in {wall:.1f} s, {sim_s / actions:.2f} s simulated each); "
-          f"physics {physics:.0f} steps/s = {out['ratio_per_worker']:.1%} of raw per worker")
+          f"physics {out['sim_steps_per_s']:.0f} steps/s of {raw:.0f} raw: "
+          f"efficiency {out['efficiency']:.1%}")
     return out

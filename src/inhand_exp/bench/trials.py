@@ -60,6 +60,7 @@ class Bench:
         self.workspace = Workspace.from_config(cfg.task)
         prim = cfg.primitives
         self.gains = Gains.from_config(prim)
+        self.settle_early = prim.settle_early
         self.durations = {"repose": prim.repose_duration_s, "slide": prim.slide_duration_s,
                           "flip": prim.flip_duration_s, "release": prim.release_duration_s,
                           "land": prim.land_duration_s}
@@ -140,7 +141,7 @@ def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
         return None
     start = b.world.object_pose()
     t = time.perf_counter()
-    out = execute(b.world, prim, offset)
+    out = execute(b.world, prim, offset, settle_early=b.settle_early)
     em, er = _pose_error(b.world.object_pose(), start + delta)
     ok = out.ok and em <= REPOSE_TOL[0] and er <= REPOSE_TOL[1]
     return Trial(ok, out.dropped, em, er, out.sim_time_s,
@@ -160,7 +161,7 @@ def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
         return None
     before = b.coords()
     t = time.perf_counter()
-    out = execute(b.world, prim, b.offset(rng))
+    out = execute(b.world, prim, b.offset(rng), settle_early=b.settle_early)
     moved = b.coords() - before
     err = abs(float(moved[finger]) - sign * dc)
     in_contact = finger in b.faces()

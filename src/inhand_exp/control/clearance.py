@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 
 def _clip(p: float, q: float, t0: float, t1: float) -> tuple[float, float] | None:
     """One Liang-Barsky step: the part of [t0, t1] where ``p t <= q``."""
@@ -62,6 +64,30 @@ def segment_box_distance(ax: float, az: float, bx: float, bz: float, hx: float, 
         for cz in (-hz, hz):
             best = min(best, _point_segment(cx, cz, ax, az, bx, bz))
     return best
+
+
+def segment_box_distances(ax: np.ndarray, az: np.ndarray, bx: np.ndarray, bz: np.ndarray,
+                          hx: float, hz: float) -> np.ndarray:
+    """``segment_box_distance`` over arrays of segments at once (the same answers)."""
+    dx, dz = bx - ax, bz - az
+    t0, t1 = np.zeros(ax.shape), np.ones(ax.shape)
+    meets = np.ones(ax.shape, dtype=bool)
+    for p, q in ((-dx, ax + hx), (dx, hx - ax), (-dz, az + hz), (dz, hz - az)):
+        flat = p == 0.0
+        meets &= ~flat | (q >= 0.0)
+        r = q / np.where(flat, 1.0, p)
+        t0 = np.where(p < 0.0, np.maximum(t0, r), t0)
+        t1 = np.where(p > 0.0, np.minimum(t1, r), t1)
+    meets &= t0 <= t1
+    best = np.minimum(np.hypot(np.maximum(np.abs(ax) - hx, 0.0), np.maximum(np.abs(az) - hz, 0.0)),
+                      np.hypot(np.maximum(np.abs(bx) - hx, 0.0), np.maximum(np.abs(bz) - hz, 0.0)))
+    n = dx * dx + dz * dz
+    safe = np.where(n == 0.0, 1.0, n)
+    for cx in (-hx, hx):
+        for cz in (-hz, hz):
+            s = np.where(n == 0.0, 0.0, np.clip(((cx - ax) * dx + (cz - az) * dz) / safe, 0.0, 1.0))
+            best = np.minimum(best, np.hypot(ax + s * dx - cx, az + s * dz - cz))
+    return np.where(meets, 0.0, best)
 
 
 def to_object(x: float, z: float, px: float, pz: float, c: float, s: float

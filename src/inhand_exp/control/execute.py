@@ -1,7 +1,8 @@
-"""Run one primitive to its end on a world, torque every physics step, and report the outcome."""
+"""Run one primitive to its end on a world, torques every control period, and report the outcome."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -41,6 +42,9 @@ class Primitive(Protocol):
 
     def achieved(self, obs: Observation) -> str | None:
         """At the end: None if the goal is reached in ``obs``, else what is missing."""
+
+    # Optional: ``settled(obs) -> bool``, True when the primitive may end now because its goal
+    # is reached and nothing moves (see ``execute``'s ``settle_early``).
 
 
 class WorldLike(Protocol):
@@ -89,10 +93,11 @@ class Outcome:
 
 def _off_course(pose: np.ndarray, start: np.ndarray, delta: np.ndarray) -> float:
     """How far (m) ``pose`` is from the straight path ``start`` -> ``start + delta`` in x-z."""
-    d = delta[:2]
-    n = float(d @ d)
-    s = 0.0 if n == 0.0 else min(1.0, max(0.0, float((pose[:2] - start[:2]) @ d) / n))
-    return float(np.linalg.norm(pose[:2] - start[:2] - s * d))
+    dx, dz = float(delta[0]), float(delta[1])
+    ex, ez = float(pose[0]) - float(start[0]), float(pose[1]) - float(start[1])
+    n = dx * dx + dz * dz
+    s = 0.0 if n == 0.0 else min(1.0, max(0.0, (ex * dx + ez * dz) / n))
+    return math.hypot(ex - s * dx, ez - s * dz)
 
 
 def joint_hold(q_ref: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: float = 40.0,
@@ -104,7 +109,7 @@ def joint_hold(q_ref: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: float = 40.
 def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | None = None,
             check_every: int = 4, drop_grace_s: float = 0.05,
             state_check: StateCheck = state_problem, started: bool = False,
-            fall_m: float = 0.02, settle_s: float = 0.25) -> Outcome:
+            fall_m: float = 0.02, settle_s: float = 0.25, settle_early: bool = False) -> Outcome:
     """Drive ``primitive`` for its duration; stop early on infeasibility, a drop or instability.
 
     ``pose_offset`` is the observation error on the object pose (noise drawn by the caller, held
@@ -115,10 +120,13 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
     fingertips touches it. ``started``: the primitive was already planned (``start`` accepted)
     on the current state, as the feasibility filter does, so it is not planned again. When the
     force plan fails on the way, the hand holds its joints for ``settle_s`` and the object is
-    judged again: a drop if it is not held then.
+    judged again: a drop if it is not held then. ``settle_early``: a primitive with a
+    ``settled`` test that passes at a check ends there, judged as at the end of its duration
+    (the rest of its time would only hold the object still where it already is).
     """
     offset = np.zeros(3) if pose_offset is None else pose_offset
     n = round(primitive.duration_s / world.dt)
+    settled = getattr(primitive, "settled", None) if settle_early else None
     lost_since: float | None = None
     touched: set[str] = set()
 
@@ -150,6 +158,10 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
                 lost = fell(pose)
                 if lost is not None:
                     return Outcome(False, "lost_contact", lost, k * world.dt, k)
+                if settled is not None and lost_since is None and settled(
+                        Observation(q, qd, pose + offset, twist, k * world.dt)):
+                    n = k
+                    break
         tau = primitive.torques(Observation(q, qd, pose + offset, twist, k * world.dt))
         if tau is None:
             return _safe_stop(world, q, k, fell, state_check, settle_s, check_every)

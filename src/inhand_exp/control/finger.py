@@ -165,6 +165,8 @@ class FingerModel:
         Equal to ``tip``, ``jacobian``, ``jacobian_dot_qd``, ``mass_matrix``, ``coriolis`` and
         ``gravity_torque``; computed together so sines and cosines are shared.
         """
+        # Python floats: arithmetic on numpy scalars costs several times as much
+        q1, q2, qd1, qd2 = float(q1), float(q2), float(qd1), float(qd2)
         c1, s1 = math.cos(q1), math.sin(q1)
         q12 = q1 + q2
         c12, s12 = math.cos(q12), math.sin(q12)

@@ -138,7 +138,7 @@ class Squeeze:
         """Find the internal force deepest inside the cones (LP), normalised to sum f_n = 1.
 
         Contacts in ``light`` switch the plan to a per-step LP whose cost weighs their normal
-        force ten times.
+        force ten times (and no internal squeeze is looked for: ``usable`` is False).
         """
         k = G.shape[1] // 2
         coupled = coupled or {}
@@ -151,8 +151,9 @@ class Squeeze:
         Gr = G[:, cols].copy()
         for i, c in coupled.items():
             Gr[:, pos[2 * i]] += c * G[:, 2 * i + 1]
-        lam0, margin = _deepest_squeeze(Gr, fn, fric, mu)
         m = len(cols)
+        # a plan with its own cost solves the LP at every step: no squeeze to find
+        lam0, margin = _deepest_squeeze(Gr, fn, fric, mu) if not light else (np.zeros(m), 0.0)
         cost = None
         if light:
             cost = np.zeros(m)
@@ -179,6 +180,9 @@ class Squeeze:
 
     def solve(self, w: np.ndarray) -> np.ndarray | None:
         """Forces ``lam`` (2k,) balancing wrench ``w`` (same frame as ``G``), or None."""
+        if self.usable and self.cost is None and not len(self.tied):
+            red = self._closed_form(w)  # every column free: lam is red, in column order
+            return None if red is None else np.array(red)
         red = self._closed_form(w) if self.usable and self.cost is None else self._lp(w)
         if red is None:
             return None
@@ -209,7 +213,7 @@ class Squeeze:
                                                     lower, upper))
         return self.lp.solve(w)
 
-    def _closed_form(self, w: np.ndarray) -> np.ndarray | None:
+    def _closed_form(self, w: np.ndarray) -> list[float] | None:
         """``pinv(G) w + alpha lam0`` with the least feasible ``alpha`` (plain floats)."""
         pinv, lam0, rows, fn = self.fast
         w0, w1, w2 = float(w[0]), float(w[1]), float(w[2])
@@ -217,7 +221,7 @@ class Squeeze:
         alpha = 0.0
         for bound, (c1, i1, c2, i2), den in rows:
             alpha = max(alpha, (bound - c1 * lp[i1] - c2 * lp[i2]) / den)
-        red = np.array([x + alpha * y for x, y in zip(lp, lam0, strict=True)])
+        red = [x + alpha * y for x, y in zip(lp, lam0, strict=True)]
         if max(red[i] for i in fn) > self.f_max:
             return None
         return red

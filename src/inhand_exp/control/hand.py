@@ -8,7 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from inhand_exp.config import HandConfig, ObjectConfig
-from inhand_exp.control.clearance import lowest_corner, segment_box_distance, to_object
+from inhand_exp.control.clearance import (
+    lowest_corner,
+    segment_box_distance,
+    segment_box_distances,
+    to_object,
+)
 from inhand_exp.control.finger import FingerModel
 from inhand_exp.control.grasp import BoxShape, Contacts, contact_frames, rotation
 
@@ -119,6 +124,26 @@ class HandModel:
         hx, hz = self.shape.half_x, self.shape.half_z
         return min(segment_box_distance(*b, *e, hx, hz),
                    segment_box_distance(*e, *t, hx, hz)) - self.link_radius
+
+    def finger_gaps(self, i: int, Q: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """``finger_gap`` for many joint angles ``Q`` (n, 2) of finger ``i`` at once."""
+        f = self.fingers[i]
+        q1, q12 = Q[:, 0], Q[:, 0] + Q[:, 1]
+        ex, ez = f.base_x + f.l1 * np.cos(q1), f.base_z + f.l1 * np.sin(q1)
+        tx, tz = ex + f.l2 * np.cos(q12), ez + f.l2 * np.sin(q12)
+        lo, hi = self.palm_x
+        below = ((lo <= ex) & (ex <= hi) & (ez < f.base_z)) | \
+                ((lo <= tx) & (tx <= hi) & (tz < f.base_z))
+        px, pz, c, s = float(pose[0]), float(pose[1]), math.cos(pose[2]), math.sin(pose[2])
+        bx, bz = to_object(f.base_x, f.base_z, px, pz, c, s)
+        exo, ezo = to_object(ex, ez, px, pz, c, s)
+        inner = (f.l2 - TIP_OVERLAP * self.tip_radius) / f.l2
+        txo, tzo = to_object(ex + inner * (tx - ex), ez + inner * (tz - ez), px, pz, c, s)
+        hx, hz = self.shape.half_x, self.shape.half_z
+        gap = np.minimum(segment_box_distances(np.full_like(exo, bx), np.full_like(ezo, bz),
+                                               exo, ezo, hx, hz),
+                         segment_box_distances(exo, ezo, txo, tzo, hx, hz)) - self.link_radius
+        return np.where(below, -np.inf, gap)
 
     def clear(self, q: np.ndarray, pose: np.ndarray, fingers=(0, 1, 2)) -> bool:
         """The object above the palm and the links of ``fingers`` clear of it, by the

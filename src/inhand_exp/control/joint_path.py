@@ -7,26 +7,34 @@ between the branches is through the straight finger. A path in the object frame 
 inverse kinematics of one branch cannot do that; a path in the finger's own two-dimensional
 joint space can.
 
-``plan_joint_path`` searches a grid over the joint limits (A*, 8-connected, cells checked
-lazily) for joint angles whose links and tip keep a margin of air to the object and stay above
+``plan_joint_path`` searches a grid over the joint limits (Dijkstra, 8-connected) for joint
+angles whose links and tip keep a margin of air to the object and stay above
 the palm, then shortens the path and checks every segment densely. ``JointPath`` follows
 waypoints with one minimum-jerk move per segment and a joint-space PD with feed-forward.
 """
 
 from __future__ import annotations
 
-import heapq
 import math
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
 from inhand_exp.control.clearance import to_object
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import min_jerk
 
+SCALAR_POINTS = 8  # segments checked at fewer points than this are checked point by point
+
 
 class FreeSpace:
-    """Which joint angles of ``finger`` keep it clear of the object at ``pose``."""
+    """Which joint angles of ``finger`` keep it clear of the object at ``pose``.
+
+    The grid of ``cells`` x ``cells`` joint angles over the limits is checked at once (numpy),
+    and the shortest ways through its free cells from a start cell are found once (Dijkstra,
+    8-connected, ``scipy.sparse.csgraph``) for every goal a flip tries.
+    """
 
     def __init__(self, model: HandModel, finger: int, pose: np.ndarray, margin: float,
                  cells: int = 56):
@@ -36,11 +44,29 @@ class FreeSpace:
         self.hi = np.array(f.q_upper) - 0.05
         self.n = cells
         self.step = (self.hi - self.lo) / (cells - 1)
-        self._cache: dict[tuple[int, int], bool] = {}
         self._c, self._s = math.cos(pose[2]), math.sin(pose[2])
+        ij = np.stack(np.meshgrid(np.arange(cells), np.arange(cells), indexing="ij"), axis=-1)
+        self.grid = self.ok_many(self.lo + self.step * ij.reshape(-1, 2)).reshape(cells, cells)
+        self._graph = None
+        self._ways: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    def ok_many(self, Q: np.ndarray) -> np.ndarray:
+        """For each row of ``Q`` (n, 2): the links and the tip clear of the object by the
+        margin, joints inside the limits and above the palm."""
+        m, i = self.model, self.finger
+        f = m.fingers[i]
+        inside = np.all((self.lo - 1e-9 <= Q) & (self.hi + 1e-9 >= Q), axis=1)
+        q12 = Q[:, 0] + Q[:, 1]
+        tx = f.base_x + f.l1 * np.cos(Q[:, 0]) + f.l2 * np.cos(q12)
+        tz = f.base_z + f.l1 * np.sin(Q[:, 0]) + f.l2 * np.sin(q12)
+        x, z = to_object(tx, tz, self.pose[0], self.pose[1], self._c, self._s)
+        hx, hz = m.shape.half_x, m.shape.half_z
+        air = np.hypot(np.maximum(np.abs(x) - hx, 0.0), np.maximum(np.abs(z) - hz, 0.0))
+        return (inside & (m.finger_gaps(i, Q, self.pose) >= self.margin)
+                & (air >= m.tip_radius + self.margin) & (tz >= f.base_z + m.tip_radius))
 
     def ok(self, q: np.ndarray) -> bool:
-        """The links and the tip clear of the object by the margin, joints above the palm."""
+        """``ok_many`` for one joint vector (plain floats: cheaper than numpy for one)."""
         m, i = self.model, self.finger
         if np.any(q < self.lo - 1e-9) or np.any(q > self.hi + 1e-9):
             return False
@@ -56,12 +82,8 @@ class FreeSpace:
         return self.lo + self.step * np.array(cell)
 
     def free(self, cell: tuple[int, int]) -> bool:
-        hit = self._cache.get(cell)
-        if hit is None:
-            i, j = cell
-            hit = 0 <= i < self.n and 0 <= j < self.n and self.ok(self.cell_q(cell))
-            self._cache[cell] = hit
-        return hit
+        i, j = cell
+        return bool(0 <= i < self.n and 0 <= j < self.n and self.grid[i, j])
 
     def nearest_free(self, q: np.ndarray) -> tuple[int, int] | None:
         """The free cell nearest ``q`` from which the straight move to ``q`` is clear."""
@@ -75,67 +97,98 @@ class FreeSpace:
 
     def segment_ok(self, a: np.ndarray, b: np.ndarray, step_rad: float = 0.02) -> bool:
         n = max(2, int(math.ceil(float(np.max(np.abs(b - a))) / step_rad)) + 1)
-        return all(self.ok(a + (b - a) * s) for s in np.linspace(0.0, 1.0, n))
+        if n <= SCALAR_POINTS:
+            return all(self.ok(a + (b - a) * s) for s in np.linspace(0.0, 1.0, n))
+        return bool(self.ok_many(a + (b - a) * np.linspace(0.0, 1.0, n)[:, None]).all())
+
+    def cells_between(self, start: tuple[int, int], goal: tuple[int, int]
+                      ) -> list[tuple[int, int]] | None:
+        """The shortest chain of free cells from ``start`` to ``goal`` (both included)."""
+        if start not in self._ways:
+            _, pred = dijkstra(self._free_graph(), indices=start[0] * self.n + start[1],
+                               return_predecessors=True)
+            self._ways[start] = pred
+        pred = self._ways[start]
+        k, first = goal[0] * self.n + goal[1], start[0] * self.n + start[1]
+        if k != first and pred[k] < 0:
+            return None
+        chain = [k]
+        while chain[-1] != first:
+            chain.append(int(pred[chain[-1]]))
+        return [divmod(c, self.n) for c in reversed(chain)]
+
+    def _free_graph(self) -> csr_matrix:
+        """Edges between 8-neighbouring free cells, weighted by their distance in joint space."""
+        if self._graph is None:
+            n, free = self.n, self.grid
+            rows, cols, cost = [], [], []
+            idx = np.arange(n * n).reshape(n, n)
+            for a in (-1, 0, 1):
+                for b in (-1, 0, 1):
+                    if (a, b) == (0, 0):
+                        continue
+                    src = (slice(max(0, -a), n - max(0, a)), slice(max(0, -b), n - max(0, b)))
+                    dst = (slice(max(0, a), n - max(0, -a)), slice(max(0, b), n - max(0, -b)))
+                    both = free[src] & free[dst]
+                    rows.append(idx[src][both])
+                    cols.append(idx[dst][both])
+                    cost.append(np.full(int(both.sum()),
+                                        math.hypot(a * self.step[0], b * self.step[1])))
+            self._graph = csr_matrix((np.concatenate(cost),
+                                      (np.concatenate(rows), np.concatenate(cols))),
+                                     shape=(n * n, n * n))
+        return self._graph
 
 
-def plan_joint_path(space: FreeSpace, q_start: np.ndarray, q_goal: np.ndarray,
-                    max_expand: int = 4000) -> list[np.ndarray] | None:
+def plan_joint_path(space: FreeSpace, q_start: np.ndarray, q_goal: np.ndarray
+                    ) -> list[np.ndarray] | None:
     """Joint waypoints from ``q_start`` to ``q_goal`` through free space, or None."""
     if space.segment_ok(q_start, q_goal):
         return [q_start, q_goal]
     start, goal = space.nearest_free(q_start), space.nearest_free(q_goal)
     if start is None or goal is None:
         return None
-    w = space.step
-
-    def h(c: tuple[int, int]) -> float:
-        return math.hypot((c[0] - goal[0]) * w[0], (c[1] - goal[1]) * w[1])
-
-    moves = [(a, b, math.hypot(a * w[0], b * w[1])) for a in (-1, 0, 1) for b in (-1, 0, 1)
-             if (a, b) != (0, 0)]
-    best = {start: 0.0}
-    came: dict[tuple[int, int], tuple[int, int]] = {}
-    heap = [(h(start), 0.0, start)]
-    expanded = 0
-    while heap:
-        _, g, cell = heapq.heappop(heap)
-        if cell == goal:
-            break
-        if g > best.get(cell, math.inf):
-            continue
-        expanded += 1
-        if expanded > max_expand:
-            return None
-        for a, b, cost in moves:
-            nxt = (cell[0] + a, cell[1] + b)
-            if not space.free(nxt):
-                continue
-            ng = g + cost
-            if ng < best.get(nxt, math.inf):
-                best[nxt], came[nxt] = ng, cell
-                heapq.heappush(heap, (ng + h(nxt), ng, nxt))
-    else:
+    cells = space.cells_between(start, goal)
+    if cells is None:
         return None
-    cells = [goal]
-    while cells[-1] != start:
-        cells.append(came[cells[-1]])
-    path = [q_start, *(space.cell_q(c) for c in reversed(cells)), q_goal]
+    path = [q_start, *(space.cell_q(c) for c in _corners(cells)), q_goal]
     return _shorten(space, path)
 
 
-def _shorten(space: FreeSpace, path: list[np.ndarray]) -> list[np.ndarray] | None:
+def _corners(cells: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The cells of a chain where it turns (and its ends): the straight runs between them are
+    the same segments in joint space."""
+    out = [cells[0]]
+    for a, b, c in zip(cells, cells[1:], cells[2:], strict=False):
+        if (b[0] - a[0], b[1] - a[1]) != (c[0] - b[0], c[1] - b[1]):
+            out.append(b)
+    if len(cells) > 1:
+        out.append(cells[-1])
+    return out
+
+
+def _shorten(space: FreeSpace, path: list[np.ndarray], step_rad: float = 0.02
+             ) -> list[np.ndarray] | None:
     """Skip every waypoint the straight move past it makes unnecessary; None if a segment of
-    the result is not clear."""
+    the result is not clear. The moves from one waypoint to all later ones are checked in one
+    batch (points ``step_rad`` apart, as ``FreeSpace.segment_ok``)."""
     out = [path[0]]
     k = 0
     while k < len(path) - 1:
-        j = len(path) - 1
-        while j > k + 1 and not space.segment_ok(path[k], path[j]):
-            j -= 1
-        if not space.segment_ok(path[k], path[j]):
+        a = path[k]
+        points, owner = [], []
+        for j in range(k + 1, len(path)):
+            b = path[j]
+            n = max(2, int(math.ceil(float(np.max(np.abs(b - a))) / step_rad)) + 1)
+            points.append(a + (b - a) * np.linspace(0.0, 1.0, n)[:, None])
+            owner.append(np.full(n, j))
+        ok = space.ok_many(np.concatenate(points))
+        bad = set(np.concatenate(owner)[~ok].tolist())
+        clear = [j for j in range(k + 1, len(path)) if j not in bad]
+        if not clear or (clear[-1] == k + 1 and k + 1 in bad):
             return None
-        out.append(path[j])
-        k = j
+        k = clear[-1]
+        out.append(path[k])
     return out
 
 

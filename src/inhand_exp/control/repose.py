@@ -147,7 +147,8 @@ def object_wrench(model: HandModel, gains: Gains, pose: np.ndarray, twist: np.nd
 
     The wrench is what the contacts must apply on the nominal object: ``M a + (0, m g, 0)``.
     """
-    p_ref, v_ref, a_ref = ref
+    p_ref, v_ref, a_ref = (list(map(float, v)) for v in ref)  # plain floats: cheaper
+    pose, twist = list(map(float, pose)), list(map(float, twist))
     kp, kd = gains.kp, gains.kd
     e_th = (p_ref[2] - pose[2] + math.pi) % (2 * math.pi) - math.pi
     ax = a_ref[0] + kd * (v_ref[0] - twist[0]) + kp * (p_ref[0] - pose[0])
@@ -166,6 +167,7 @@ def contact_force(plan: GraspPlan, lam: np.ndarray, k: int, R: np.ndarray) -> np
     return lam[2 * k] * n_W + lam[2 * k + 1] * np.array([-n_W[1], n_W[0]])
 
 
+SETTLED_SPEED = (0.005, 0.02)  # m/s, rad/s: an object this slow is at rest for settle_early
 DAMPING = 1e-4  # damped least squares near singular finger postures
 
 
@@ -284,6 +286,11 @@ class Repose:
         if e_m <= self.tol[0] and e_rad <= self.tol[1]:
             return None
         return f"pose error {e_m * 1e3:.1f} mm, {e_rad:.3f} rad"
+
+    def settled(self, obs, speed: tuple[float, float] = SETTLED_SPEED) -> bool:
+        """Past the move, within ``tol`` of the goal and at rest (``speed``: m/s, rad/s)."""
+        return (obs.t >= self.move_s and math.hypot(obs.twist[0], obs.twist[1]) <= speed[0]
+                and abs(obs.twist[2]) <= speed[1] and self.achieved(obs) is None)
 
     def torques(self, obs) -> np.ndarray | None:
         ref = min_jerk(self.origin, self.goal, self.move_s, obs.t)

@@ -11,11 +11,14 @@ start pose exactly as in a hold.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from inhand_exp.control.grasp import Contacts, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
+    SETTLED_SPEED,
     Gains,
     contact_force,
     damped_qdd,
@@ -93,6 +96,16 @@ class Slide:
             return None
         return (f"finger {self.finger} at {coord:+.3f} m (target {self.c1:+.3f}), "
                 f"{gap * 1e3:.1f} mm off its face")
+
+    def settled(self, obs, joint_speed: float = 0.05) -> bool:
+        """Past the move, the tip at its target, the object at rest and the sliding finger's
+        joints slower than ``joint_speed`` (rad/s)."""
+        i = self.finger
+        return (obs.t >= self.move_s
+                and math.hypot(obs.twist[0], obs.twist[1]) <= SETTLED_SPEED[0]
+                and abs(obs.twist[2]) <= SETTLED_SPEED[1]
+                and max(abs(obs.qd[2 * i]), abs(obs.qd[2 * i + 1])) <= joint_speed
+                and self.achieved(obs) is None)
 
     def torques(self, obs) -> np.ndarray | None:
         model, i = self.model, self.finger

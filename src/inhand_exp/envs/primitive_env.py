@@ -1,12 +1,14 @@
 """The mid-level TorchRL environment (paper section III-B): one step is one primitive.
 
-Clocks: the policy acts once per primitive; the primitive's torque law runs every physics step
-(``sim.timestep_s``) for the primitive's duration. Observation (paper IV-A): joint angles and
+Clocks: the policy acts once per primitive; the primitive's torque law runs every control period
+(``sim.timestep_s`` x ``sim.control_substeps``) for the primitive's duration, or until it has
+settled (``primitives.settle_early``). Observation (paper IV-A): joint angles and
 velocities (12), the observed object pose ``X_t`` (3, with uniform noise under ``noise=paper``)
 and the goal ``X_g`` (3); ``action_mask`` says which actions the feasibility filter allows.
 ``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
 with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
-into ``OUTCOMES``) and, when ``states_hz`` > 0, the ``states`` snapshots taken during it (see
+into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made and, when
+``states_hz`` > 0, the ``states`` snapshots taken during it (see
 ``envs.snapshots``). None of these is part of the policy's ``observation``.
 Filter modes: ``mask`` (only allowed actions may be taken; an episode with none ends), ``penalty``
 (the paper: a rejected action costs ``task.reward_invalid`` and does nothing) and ``off`` (every
@@ -87,6 +89,7 @@ class PrimitiveEnv(EnvBase):
         self.observation_spec["pose"] = Unbounded(shape=(3,), dtype=torch.float32)
         self.observation_spec["valid"] = Binary(n=1, dtype=torch.bool)
         self.observation_spec["outcome"] = Categorical(len(OUTCOMES), shape=(1,))
+        self.observation_spec["physics_steps"] = Unbounded(shape=(1,), dtype=torch.int64)
         if self.snapshots is not None:
             self.observation_spec["states"] = Unbounded(
                 shape=(self.snapshots.capacity, STATE_WIDTH), dtype=torch.float32)
@@ -133,6 +136,7 @@ class PrimitiveEnv(EnvBase):
             "pose": torch.tensor(self.pose, dtype=torch.float32),
             "valid": torch.tensor([valid]),
             "outcome": torch.tensor([OUTCOMES.index(outcome)]),
+            "physics_steps": torch.tensor([self.world.physics_steps]),
             **flags}, batch_size=())
         if self.snapshots is not None:
             td["states"] = torch.from_numpy(self.snapshots.table())
@@ -188,7 +192,8 @@ class PrimitiveEnv(EnvBase):
             if prim is None:
                 prim = make_primitive(action, self.model, self.contacts, self.gains, self.prim)
             world = self.world if self.snapshots is None else self.snapshots
-            out = execute(world, prim, self.offset, started=self.planned[a] is not None)
+            out = execute(world, prim, self.offset, started=self.planned[a] is not None,
+                          settle_early=self.prim.settle_early)
             self.sim_time += out.sim_time_s
             valid, outcome = out.reason != "infeasible", out.reason
             self.dropped = out.dropped  # from the simulated state, whatever the primitive says

@@ -2,13 +2,15 @@
 
 The policy is a masked categorical over the discrete actions (infeasible actions get no
 probability), the critic a value network; both are 3 x 256 MLPs as in the paper. Training reports
-through ``progress(iteration, metrics)`` and never imports the logger. A checkpoint holds
-everything needed to resume (networks, optimiser, counters, RNG states) as tensors and plain
-numbers, so it loads with ``torch.load(weights_only=True)``.
+through ``progress(iteration, metrics)`` and never imports the logger; the metrics include the
+wall time of the iteration's collection (``collect_s``) and of its update (``learn_s``). A
+checkpoint holds everything needed to resume (networks, optimiser, counters, RNG states) as
+tensors and plain numbers, so it loads with ``torch.load(weights_only=True)``.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,15 +114,21 @@ class PPO:
                               total_frames=batches * p.frames_per_batch,
                               auto_register_policy_transforms=False)  # not recurrent
         try:
+            t = time.perf_counter()
             for batch in collector:
+                collected = time.perf_counter()
                 metrics = self._update(batch)
                 collector.update_policy_weights_()
+                learned = time.perf_counter()
                 self.iteration += 1
                 self.frames += batch.numel()
                 if progress is not None:
-                    progress(self.iteration, {"frames": self.frames, **metrics})
+                    progress(self.iteration, {"frames": self.frames, **metrics,
+                                              "collect_s": collected - t,
+                                              "learn_s": learned - collected})
                 if checkpoint is not None and self.iteration % checkpoint_every == 0:
                     self.save(checkpoint)
+                t = time.perf_counter()
         finally:
             collector.shutdown()
         if checkpoint is not None:

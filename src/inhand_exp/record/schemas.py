@@ -125,6 +125,8 @@ TRAIN_ITERATION = _topic(
         "drop_rate": _fraction("Fraction of episodes finished this iteration that dropped the "
                                "object."),
         "actions_per_s": _number("Throughput: actions executed per second of wall time (1/s)."),
+        "collect_s": _number("Wall time this iteration spent collecting its batch (s)."),
+        "learn_s": _number("Wall time this iteration spent on the learner's update (s)."),
     },
     ["iteration", "frames"],
 )

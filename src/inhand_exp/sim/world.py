@@ -80,7 +80,9 @@ class World:
     """One PyBullet DIRECT client holding the hand and the object."""
 
     def __init__(self, sim: SimConfig, hand: HandConfig, obj: ObjectSpec):
-        self.dt = sim.timestep_s
+        self.substeps = sim.control_substeps
+        self.physics_dt = sim.timestep_s
+        self.dt = sim.timestep_s * self.substeps  # one ``step``: the control period
         self.max_torque = hand.max_torque_nm
         self.obj = obj
         self._cid = pb.connect(pb.DIRECT)
@@ -105,6 +107,7 @@ class World:
         self._steps = 0
         self._stamp, self._points_at, self._cache = 0, -1, ()  # see _points
         self.step_wall_s = 0.0  # wall time spent inside stepSimulation (benchmarks)
+        self.physics_steps = 0  # stepSimulation calls since the world was made (benchmarks)
 
     def _load(self, path: Path, text: str, base: tuple[float, float, float]) -> int:
         path.write_text(text)
@@ -174,12 +177,10 @@ class World:
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint angles ``q`` (6,) (rad) and velocities ``qd`` (6,), finger by finger."""
-        q, qd = [], []
-        for f in self.fingers:
-            for s in pb.getJointStates(f, (0, 1), physicsClientId=self._cid):
-                q.append(s[0])
-                qd.append(s[1])
-        return np.array(q), np.array(qd)
+        cid = self._cid
+        states = [s for f in self.fingers for s in pb.getJointStates(f, (0, 1),
+                                                                     physicsClientId=cid)]
+        return np.array([s[0] for s in states]), np.array([s[1] for s in states])
 
     def joint_q(self) -> np.ndarray:
         return self.joint_state()[0]
@@ -254,12 +255,23 @@ class World:
         Held means at least two fingertips touch the object and two of them push from opposite
         sides (inward normals more than 120 deg apart).
         """
-        contacts = self.contacts()
-        fingers = {c.finger for c in contacts}
+        # plain floats, no Contact objects: this runs every few steps of every primitive
+        obj, fingers, normals = self.object, set(), []
+        for c in self._points():
+            if c[1] == obj and c[3] == BODY_LINK and c[2] in self.fingers and c[4] == TIP_LINK:
+                sign, finger = 1.0, c[2]
+            elif c[2] == obj and c[4] == BODY_LINK and c[1] in self.fingers and c[3] == TIP_LINK:
+                sign, finger = -1.0, c[1]
+            else:
+                continue
+            nx, nz = sign * c[7][0], sign * c[7][2]
+            norm = math.hypot(nx, nz) or 1.0
+            fingers.add(finger)
+            normals.append((nx / norm, nz / norm))
         if len(fingers) < 2:
             return f"only {len(fingers)} fingertip(s) in contact"
-        normals = [c.normal for c in contacts]
-        if not any(float(a @ b) < -0.5 for i, a in enumerate(normals) for b in normals[i + 1:]):
+        if not any(ax * bx + az * bz < -0.5 for i, (ax, az) in enumerate(normals)
+                   for bx, bz in normals[i + 1:]):
             return "object not held from opposite sides"
         return None
 
@@ -270,16 +282,20 @@ class World:
     # --- stepping ---------------------------------------------------------------------------
 
     def step(self, tau: np.ndarray) -> None:
-        """Apply joint torques ``tau`` (6,) (N m, clipped to the limit) for one physics step."""
+        """Apply joint torques ``tau`` (6,) (N m, clipped to the limit) for one control period:
+        ``sim.control_substeps`` physics steps (``dt`` seconds)."""
         cid, hi = self._cid, self.max_torque
         tau = [min(hi, max(-hi, v)) for v in tau.tolist()]
-        for i, f in enumerate(self.fingers):
-            pb.setJointMotorControlArray(f, (0, 1), pb.TORQUE_CONTROL,
-                                         forces=tau[2 * i:2 * i + 2], physicsClientId=cid)
-        t = time.perf_counter()
-        pb.stepSimulation(physicsClientId=cid)
-        self.step_wall_s += time.perf_counter() - t
+        for _ in range(self.substeps):
+            # PyBullet clears a TORQUE_CONTROL torque after each step: set it every step
+            for i, f in enumerate(self.fingers):
+                pb.setJointMotorControlArray(f, (0, 1), pb.TORQUE_CONTROL,
+                                             forces=tau[2 * i:2 * i + 2], physicsClientId=cid)
+            t = time.perf_counter()
+            pb.stepSimulation(physicsClientId=cid)
+            self.step_wall_s += time.perf_counter() - t
         self._steps += 1
+        self.physics_steps += self.substeps
         self._stamp += 1
 
     def close(self) -> None:

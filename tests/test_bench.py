@@ -60,6 +60,9 @@ def test_env_reports_its_efficiency_from_the_steps_it_counted(capsys):
     assert out["raw_steps_per_s"] == pytest.approx(out["raw_steps_per_core"] * out["workers"])
     assert 0.0 < out["efficiency"] <= 1.0
     assert out["efficiency"] == pytest.approx(out["sim_steps_per_s"] / out["raw_steps_per_s"])
+    ms = out["ms_per_action"]
+    assert ms["filter"] > 0.0 and ms["execute"] > ms["step_simulation"] > 0.0
+    assert ms["filter"] + ms["execute"] < 1e3 * out["wall_s"] * out["workers"] / out["actions"]
 
 
 def test_bad_input_is_refused():

@@ -34,12 +34,15 @@ def env_throughput(cfg: DictConfig, workers: int, steps: int, seed: int,
     try:
         td = env.reset()
         actions, sim_s, sim_steps = 0, 0.0, 0
+        spent = torch.zeros(3, dtype=torch.float64)  # filter, execute, stepSimulation
         start = time.perf_counter()
         for _ in range(steps):
             before, counted = td["sim_time_s"].clone(), td["physics_steps"].clone()
+            used_before = td["wall_s"].clone()
             td, root = env.step_and_maybe_reset(random_allowed(td))
             sim_s += float((td["next", "sim_time_s"] - before).double().sum())
             sim_steps += int((td["next", "physics_steps"] - counted).sum())
+            spent += (td["next", "wall_s"] - used_before).reshape(-1, 3).sum(0)
             actions += td.numel()
             td = root
         wall = time.perf_counter() - start
@@ -51,10 +54,18 @@ def env_throughput(cfg: DictConfig, workers: int, steps: int, seed: int,
            "sim_steps": sim_steps, "sim_steps_per_action": sim_steps / actions,
            "sim_steps_per_s": sim_steps / wall, "raw_steps_per_core": raw_steps_per_core,
            "raw_steps_per_s": raw, "efficiency": sim_steps / wall / raw,
-           "physics_dt_s": cfg.sim.timestep_s}
+           "physics_dt_s": cfg.sim.timestep_s,
+           # per action, in the environments' own processes (ms): the feasibility filter,
+           # executing the primitive, and stepSimulation inside that
+           "ms_per_action": dict(zip(("filter", "execute", "step_simulation"),
+                                     (1e3 * spent / actions).tolist(), strict=True))}
     print(f"stepSimulation alone: {raw_steps_per_core:10.0f} steps/s per core (same run)")
     print(f"{used} worker(s) x {per} envs: {out['actions_per_s']:.1f} actions/s "
           f"({actions} actions in {wall:.1f} s, {sim_s / actions:.2f} s simulated each); "
           f"physics {out['sim_steps_per_s']:.0f} steps/s of {raw:.0f} raw: "
           f"efficiency {out['efficiency']:.1%}")
+    ms = out["ms_per_action"]
+    print(f"per action, in each worker: filter {ms['filter']:.1f} ms, execute "
+          f"{ms['execute']:.1f} ms (stepSimulation {ms['step_simulation']:.1f} ms); "
+          f"{1e3 * wall * used / actions:.1f} ms of worker time in all")
     return out

@@ -7,7 +7,9 @@ velocities (12), the observed object pose ``X_t`` (3, with uniform noise under `
 and the goal ``X_g`` (3); ``action_mask`` says which actions the feasibility filter allows.
 ``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
 with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
-into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made and, when
+into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made, the wall
+time spent since then in the feasibility filter, in executing primitives and inside
+``stepSimulation`` (``wall_s``, 3 values, for benchmarks) and, when
 ``states_hz`` > 0, the ``states`` snapshots taken during it (see
 ``envs.snapshots``). None of these is part of the policy's ``observation``.
 Filter modes: ``mask`` (only allowed actions may be taken; an episode with none ends), ``penalty``
@@ -16,6 +18,8 @@ action is attempted; one its primitive refuses does nothing and costs the same).
 """
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 import torch
@@ -90,6 +94,8 @@ class PrimitiveEnv(EnvBase):
         self.observation_spec["valid"] = Binary(n=1, dtype=torch.bool)
         self.observation_spec["outcome"] = Categorical(len(OUTCOMES), shape=(1,))
         self.observation_spec["physics_steps"] = Unbounded(shape=(1,), dtype=torch.int64)
+        self.observation_spec["wall_s"] = Unbounded(shape=(3,), dtype=torch.float64)
+        self.wall = np.zeros(3)  # filter, execute, stepSimulation (s, cumulative)
         if self.snapshots is not None:
             self.observation_spec["states"] = Unbounded(
                 shape=(self.snapshots.capacity, STATE_WIDTH), dtype=torch.float32)
@@ -112,8 +118,10 @@ class PrimitiveEnv(EnvBase):
         obs, self.offset, self.pose = self._observe()
         # contact bookkeeping from what the controllers see: the observed pose, never the true
         self.contacts = self.model.measured(self.contacts, obs.pose, obs.q)
+        t = time.perf_counter()
         self.mask, self.planned = feasibility(self.actions, self.model, self.contacts,
                                               self.gains, self.prim, obs)
+        self.wall[0] += time.perf_counter() - t
         mask = self.mask if self.filter == "mask" else np.ones_like(self.mask)
         vec = np.concatenate([obs.q, obs.qd, obs.pose, self.goal]).astype(np.float32)
         stuck = self.filter == "mask" and not mask.any()
@@ -137,6 +145,8 @@ class PrimitiveEnv(EnvBase):
             "valid": torch.tensor([valid]),
             "outcome": torch.tensor([OUTCOMES.index(outcome)]),
             "physics_steps": torch.tensor([self.world.physics_steps]),
+            "wall_s": torch.tensor([*self.wall[:2], self.world.step_wall_s],
+                                   dtype=torch.float64),
             **flags}, batch_size=())
         if self.snapshots is not None:
             td["states"] = torch.from_numpy(self.snapshots.table())
@@ -192,8 +202,10 @@ class PrimitiveEnv(EnvBase):
             if prim is None:
                 prim = make_primitive(action, self.model, self.contacts, self.gains, self.prim)
             world = self.world if self.snapshots is None else self.snapshots
+            t = time.perf_counter()
             out = execute(world, prim, self.offset, started=self.planned[a] is not None,
                           settle_early=self.prim.settle_early)
+            self.wall[1] += time.perf_counter() - t
             self.sim_time += out.sim_time_s
             valid, outcome = out.reason != "infeasible", out.reason
             self.dropped = out.dropped  # from the simulated state, whatever the primitive says

@@ -180,12 +180,11 @@ class Squeeze:
 
     def solve(self, w: np.ndarray) -> np.ndarray | None:
         """Forces ``lam`` (2k,) balancing wrench ``w`` (same frame as ``G``), or None."""
-        if self.usable and self.cost is None and not len(self.tied):
-            red = self._closed_form(w)  # every column free: lam is red, in column order
-            return None if red is None else np.array(red)
         red = self._closed_form(w) if self.usable and self.cost is None else self._lp(w)
         if red is None:
             return None
+        if not len(self.tied):  # no coupled contact: the free variables are lam, in order
+            return np.array(red)
         lam = np.zeros(self.size)
         lam[self.cols] = red
         for var, col, coef in self.tied:

@@ -28,6 +28,12 @@ from inhand_exp.control.repose import min_jerk
 SCALAR_POINTS = 8  # segments checked at fewer points than this are checked point by point
 
 
+def segment_points(a: np.ndarray, b: np.ndarray, step_rad: float = 0.02) -> np.ndarray:
+    """Joint angles (n, 2) from ``a`` to ``b``, both included, at most ``step_rad`` apart."""
+    n = max(2, int(math.ceil(float(np.max(np.abs(b - a))) / step_rad)) + 1)
+    return a + (b - a) * np.linspace(0.0, 1.0, n)[:, None]
+
+
 class FreeSpace:
     """Which joint angles of ``finger`` keep it clear of the object at ``pose``.
 
@@ -48,7 +54,7 @@ class FreeSpace:
         ij = np.stack(np.meshgrid(np.arange(cells), np.arange(cells), indexing="ij"), axis=-1)
         self.grid = self.ok_many(self.lo + self.step * ij.reshape(-1, 2)).reshape(cells, cells)
         self._graph = None
-        self._ways: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._ways: dict[tuple[int, int], np.ndarray] = {}  # start cell -> predecessors
 
     def ok_many(self, Q: np.ndarray) -> np.ndarray:
         """For each row of ``Q`` (n, 2): the links and the tip clear of the object by the
@@ -95,11 +101,11 @@ class FreeSpace:
                 return cell
         return None
 
-    def segment_ok(self, a: np.ndarray, b: np.ndarray, step_rad: float = 0.02) -> bool:
-        n = max(2, int(math.ceil(float(np.max(np.abs(b - a))) / step_rad)) + 1)
-        if n <= SCALAR_POINTS:
-            return all(self.ok(a + (b - a) * s) for s in np.linspace(0.0, 1.0, n))
-        return bool(self.ok_many(a + (b - a) * np.linspace(0.0, 1.0, n)[:, None]).all())
+    def segment_ok(self, a: np.ndarray, b: np.ndarray) -> bool:
+        points = segment_points(a, b)
+        if len(points) <= SCALAR_POINTS:
+            return all(self.ok(q) for q in points)
+        return bool(self.ok_many(points).all())
 
     def cells_between(self, start: tuple[int, int], goal: tuple[int, int]
                       ) -> list[tuple[int, int]] | None:
@@ -167,21 +173,15 @@ def _corners(cells: list[tuple[int, int]]) -> list[tuple[int, int]]:
     return out
 
 
-def _shorten(space: FreeSpace, path: list[np.ndarray], step_rad: float = 0.02
-             ) -> list[np.ndarray] | None:
+def _shorten(space: FreeSpace, path: list[np.ndarray]) -> list[np.ndarray] | None:
     """Skip every waypoint the straight move past it makes unnecessary; None if a segment of
     the result is not clear. The moves from one waypoint to all later ones are checked in one
-    batch (points ``step_rad`` apart, as ``FreeSpace.segment_ok``)."""
+    batch (at the points ``FreeSpace.segment_ok`` checks)."""
     out = [path[0]]
     k = 0
     while k < len(path) - 1:
-        a = path[k]
-        points, owner = [], []
-        for j in range(k + 1, len(path)):
-            b = path[j]
-            n = max(2, int(math.ceil(float(np.max(np.abs(b - a))) / step_rad)) + 1)
-            points.append(a + (b - a) * np.linspace(0.0, 1.0, n)[:, None])
-            owner.append(np.full(n, j))
+        points = [segment_points(path[k], path[j]) for j in range(k + 1, len(path))]
+        owner = [np.full(len(p), j) for j, p in enumerate(points, start=k + 1)]
         ok = space.ok_many(np.concatenate(points))
         bad = set(np.concatenate(owner)[~ok].tolist())
         clear = [j for j in range(k + 1, len(path)) if j not in bad]

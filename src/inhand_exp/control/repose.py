@@ -168,6 +168,12 @@ def contact_force(plan: GraspPlan, lam: np.ndarray, k: int, R: np.ndarray) -> np
 
 
 SETTLED_SPEED = (0.005, 0.02)  # m/s, rad/s: an object this slow is at rest for settle_early
+
+
+def at_rest(twist: np.ndarray, speed: tuple[float, float] = SETTLED_SPEED) -> bool:
+    """The object slower than ``speed`` (m/s, rad/s): what ``settled`` tests ask of it."""
+    return math.hypot(twist[0], twist[1]) <= speed[0] and abs(twist[2]) <= speed[1]
+
 DAMPING = 1e-4  # damped least squares near singular finger postures
 
 
@@ -287,10 +293,9 @@ class Repose:
             return None
         return f"pose error {e_m * 1e3:.1f} mm, {e_rad:.3f} rad"
 
-    def settled(self, obs, speed: tuple[float, float] = SETTLED_SPEED) -> bool:
-        """Past the move, within ``tol`` of the goal and at rest (``speed``: m/s, rad/s)."""
-        return (obs.t >= self.move_s and math.hypot(obs.twist[0], obs.twist[1]) <= speed[0]
-                and abs(obs.twist[2]) <= speed[1] and self.achieved(obs) is None)
+    def settled(self, obs) -> bool:
+        """Past the move, within ``tol`` of the goal and at rest (``at_rest``)."""
+        return obs.t >= self.move_s and at_rest(obs.twist) and self.achieved(obs) is None
 
     def torques(self, obs) -> np.ndarray | None:
         ref = min_jerk(self.origin, self.goal, self.move_s, obs.t)

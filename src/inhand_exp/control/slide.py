@@ -11,15 +11,13 @@ start pose exactly as in a hold.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from inhand_exp.control.grasp import Contacts, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
-    SETTLED_SPEED,
     Gains,
+    at_rest,
     contact_force,
     damped_qdd,
     follow_qdd,
@@ -101,9 +99,7 @@ class Slide:
         """Past the move, the tip at its target, the object at rest and the sliding finger's
         joints slower than ``joint_speed`` (rad/s)."""
         i = self.finger
-        return (obs.t >= self.move_s
-                and math.hypot(obs.twist[0], obs.twist[1]) <= SETTLED_SPEED[0]
-                and abs(obs.twist[2]) <= SETTLED_SPEED[1]
+        return (obs.t >= self.move_s and at_rest(obs.twist)
                 and max(abs(obs.qd[2 * i]), abs(obs.qd[2 * i + 1])) <= joint_speed
                 and self.achieved(obs) is None)
 

@@ -205,15 +205,8 @@ class World:
         unfiltered list is read and each contact is turned to act on the object.
         """
         out = []
-        obj = self.object
-        for c in self._points():
-            a, b, link_a, link_b = c[1], c[2], c[3], c[4]
-            if a == obj and link_a == BODY_LINK and b in self.fingers and link_b == TIP_LINK:
-                sign, finger, point = 1.0, b, c[5]
-            elif b == obj and link_b == BODY_LINK and a in self.fingers and link_a == TIP_LINK:
-                sign, finger, point = -1.0, a, c[6]
-            else:
-                continue
+        for sign, finger, c in self._tip_points():
+            point = c[5] if sign > 0 else c[6]  # the point on the finger
             # contactNormalOnB points from B to A; the forces reported act on A
             normal = sign * np.array([c[7][0], c[7][2]])
             normal /= float(np.hypot(*normal)) or 1.0
@@ -222,6 +215,16 @@ class World:
             out.append(Contact(self.fingers.index(finger), np.array([point[0], point[2]]),
                                normal, float(c[9]), float(tangent @ lateral[[0, 2]])))
         return out
+
+    def _tip_points(self):
+        """``(sign, finger body, point)`` for each fingertip-object contact point: ``sign`` +1
+        when PyBullet lists the object as body A, -1 when it lists it as B."""
+        obj = self.object
+        for c in self._points():
+            if c[1] == obj and c[3] == BODY_LINK and c[2] in self.fingers and c[4] == TIP_LINK:
+                yield 1.0, c[2], c
+            elif c[2] == obj and c[4] == BODY_LINK and c[1] in self.fingers and c[3] == TIP_LINK:
+                yield -1.0, c[1], c
 
     def _points(self) -> tuple:
         """PyBullet's contact points, queried once per simulated state (``contacts``,
@@ -256,14 +259,8 @@ class World:
         sides (inward normals more than 120 deg apart).
         """
         # plain floats, no Contact objects: this runs every few steps of every primitive
-        obj, fingers, normals = self.object, set(), []
-        for c in self._points():
-            if c[1] == obj and c[3] == BODY_LINK and c[2] in self.fingers and c[4] == TIP_LINK:
-                sign, finger = 1.0, c[2]
-            elif c[2] == obj and c[4] == BODY_LINK and c[1] in self.fingers and c[3] == TIP_LINK:
-                sign, finger = -1.0, c[1]
-            else:
-                continue
+        fingers, normals = set(), []
+        for sign, finger, c in self._tip_points():
             nx, nz = sign * c[7][0], sign * c[7][2]
             norm = math.hypot(nx, nz) or 1.0
             fingers.add(finger)

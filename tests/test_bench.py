@@ -80,4 +80,5 @@ def test_primitive_gains_come_from_the_config():
 
     bench = Bench(load_config("pole", ["primitives.kp=100", "primitives.min_normal_force_n=0.2",
                                        "primitives.friction_margin=0.7"]))
-    assert (bench.gains.kp, bench.gains.f_min, bench.gains.friction_margin) == (100, 0.2, 0.7)
+    assert (bench.prim.kp, bench.prim.min_normal_force_n, bench.prim.friction_margin) == (
+        100, 0.2, 0.7)

@@ -35,12 +35,14 @@ def fresh_log_path(run_dir: Path, name: str) -> Path:
 
 def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
     """Validate ``cfg``, open the run log in ``run_dir`` and do what ``cfg.mode`` asks."""
+    from inhand_exp.learn.registry import LEARNERS
     from inhand_exp.record import RunLog
     from inhand_exp.runinfo import run_config_message
 
     validate(cfg)
-    if cfg.learner.name != "ppo":
-        raise ConfigError(f"learner={cfg.learner.name} is not built yet; use learner=ppo")
+    if cfg.learner.name not in LEARNERS:
+        raise ConfigError(f"learner={cfg.learner.name} is not built yet; known learners: "
+                          f"{', '.join(sorted(LEARNERS))}")
     for what, name in (("checkpoint", cfg.checkpoint), ("goal file", cfg.eval.goals_file)):
         if name and not Path(name).is_file():  # before anything is written
             raise FileNotFoundError(f"{what} {name} not found")

@@ -216,6 +216,9 @@ class TaskConfig:
     success_tol_m: float = spec(0.01, "Success tolerance on |dx| and |dz| (m).", gt=0)
     success_tol_rad: float = spec(0.1, "Success tolerance on |dtheta| (rad).", gt=0)
     max_actions: int = spec(200, "Time limit in mid-level actions (the authors': 200).", gt=0)
+    time_limit_s: float = spec(100.0, "Time limit of an end-to-end (torque) episode in simulated "
+                               "seconds: max_actions reposes of primitives.repose_duration_s.",
+                               gt=0)
     workspace_x_m: list[float] = spec([-0.05, 0.05], "Range of object x (m) that start and goal "
                                       "poses are drawn from (the authors': +-5 cm).", length=2)
     workspace_z_m: list[float] = spec([0.18, 0.52], "Range of object z (m), the height of its "
@@ -296,6 +299,25 @@ def register_configs() -> None:
         cs.store(group=group, name="schema", node=node)
     for name, node in LEARNER_SCHEMAS.items():
         cs.store(group="learner", name=f"schema_{name}", node=node)
+
+
+def typed(node: Any, schema: type) -> Any:
+    """``node`` as an instance of its dataclass ``schema``: the object itself if it is one, else
+    the config node (a structured ``DictConfig`` or a plain mapping, as the worker processes
+    get it) converted once, so that hot loops read plain attributes and not OmegaConf's."""
+    if isinstance(node, schema):
+        return node
+    if isinstance(node, DictConfig) and OmegaConf.get_type(node) is schema:
+        return OmegaConf.to_object(node)
+    names = {f.name for f in dataclasses.fields(schema)}
+    items = node.items() if not isinstance(node, DictConfig) else (
+        (k, OmegaConf.to_container(v, resolve=True) if OmegaConf.is_config(v) else v)
+        for k, v in node.items())
+    values = {k: v for k, v in items if k in names}
+    for f in dataclasses.fields(schema):  # enums arrive as their names from plain containers
+        if f.name in values and isinstance(f.default, StrEnum):
+            values[f.name] = type(f.default)(values[f.name])
+    return schema(**values)
 
 
 def validate(cfg: DictConfig) -> None:

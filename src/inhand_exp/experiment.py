@@ -18,11 +18,8 @@ from omegaconf import DictConfig
 
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
-from inhand_exp.envs.batched import batched_env
-from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.learn.evaluate import evaluate
-from inhand_exp.learn.features import HandGeometry
-from inhand_exp.learn.ppo import PPO, PPOParams
+from inhand_exp.learn.registry import Learner, make_learner
 from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
 from inhand_exp.task.actions import action_table
@@ -47,30 +44,28 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, say: Callable[[str], No
     if mode == "goals":
         write_goal_set(cfg, run_dir, say)
         return None
-    actions = action_table(cfg.primitives)
-    hand = HandGeometry.from_config(cfg.hand) if cfg.learner.grasp_features else None
-    ppo = PPO(OBS_DIM, len(actions), PPOParams.from_config(cfg.learner), hand)
+    learner = make_learner(cfg)
     target = cfg.train.frames
     if resume:
-        ppo.load(run_dir / CHECKPOINT)
-        say(f"resuming from {run_dir / CHECKPOINT}: iteration {ppo.iteration}, "
-            f"{ppo.frames} frames")
+        learner.load(run_dir / CHECKPOINT)
+        say(f"resuming from {run_dir / CHECKPOINT}: iteration {learner.iteration}, "
+            f"{learner.frames} frames")
     elif cfg.checkpoint:
-        ppo.load(Path(cfg.checkpoint))
-        target += ppo.frames
+        learner.load(Path(cfg.checkpoint))
+        target += learner.frames
     if mode in ("train", "train_eval"):
-        _train(cfg, ppo, target, run_dir, log, say)
+        _train(cfg, learner, target, run_dir, log, say)
     if mode in ("eval", "train_eval"):
-        return _evaluate(cfg, ppo, [a.name for a in actions], run_dir, log, say)
+        return _evaluate(cfg, learner, run_dir, log, say)
     return None
 
 
-def _train(cfg, ppo: PPO, target: int, run_dir: Path, log: RunLog, say) -> None:
-    left = target - ppo.frames
+def _train(cfg, learner: Learner, target: int, run_dir: Path, log: RunLog, say) -> None:
+    left = target - learner.frames
     if left <= 0:
-        say(f"training already has {ppo.frames} of train.frames={target} frames")
+        say(f"training already has {learner.frames} of train.frames={target} frames")
         return
-    start, frames0 = time.perf_counter(), ppo.frames
+    start, frames0 = time.perf_counter(), learner.frames
     bar = ProgressBar(target, "frames", start=frames0, enabled=cfg.log.progress)
 
     spent = [0.0, 0.0]  # collecting, learning (s)
@@ -79,7 +74,7 @@ def _train(cfg, ppo: PPO, target: int, run_dir: Path, log: RunLog, say) -> None:
         wall = time.perf_counter() - start
         log.write("/train/iteration", {
             "iteration": iteration, "frames": int(m["frames"]), "wall_s": wall,
-            "losses": {k: m[k] for k in ("loss_objective", "loss_critic", "loss_entropy")},
+            "losses": {k: v for k, v in m.items() if k.startswith("loss_")},
             "mean_return": m["mean_reward"], "success_rate": m["success_rate"],
             "drop_rate": m["drop_rate"], "actions_per_s": bar.rate(int(m["frames"])),
             "collect_s": m["collect_s"], "learn_s": m["learn_s"]})
@@ -89,16 +84,16 @@ def _train(cfg, ppo: PPO, target: int, run_dir: Path, log: RunLog, say) -> None:
         bar.update(int(m["frames"]), f"it {iteration}  success {m['success_rate']:5.1%}  "
                                      f"drops {m['drop_rate']:5.1%}")
 
-    env = batched_env(cfg, derived_seed(cfg.seed, 0, ppo.iteration))
+    env = learner.make_env(cfg, derived_seed(cfg.seed, 0, learner.iteration))
     try:
-        ppo.train(env, left, progress, checkpoint=run_dir / CHECKPOINT,
-                  checkpoint_every=cfg.train.checkpoint_every)
+        learner.train(env, left, progress, checkpoint=run_dir / CHECKPOINT,
+                      checkpoint_every=cfg.train.checkpoint_every)
     finally:
         bar.close()
         if not env.is_closed:  # the collector closes it when it ends
             env.close()
     wall = time.perf_counter() - start
-    say(f"policy saved to {run_dir / CHECKPOINT} ({ppo.frames} frames, {wall:.0f} s: "
+    say(f"policy saved to {run_dir / CHECKPOINT} ({learner.frames} frames, {wall:.0f} s: "
         f"collecting {spent[0]:.0f} s, learning {spent[1]:.0f} s = {spent[1] / wall:.1%})")
 
 
@@ -123,8 +118,7 @@ def write_goal_set(cfg, run_dir: Path, say) -> Path:
     return path
 
 
-def _evaluate(cfg, ppo: PPO, names: list[str], run_dir: Path, log: RunLog, say
-              ) -> dict[str, float]:
+def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say) -> dict[str, float]:
     goals = test_goals(cfg)
     save_goals(goals, run_dir / "goals.csv")
     labels = {"object": cfg.object.name, "perturb": cfg.perturb.name, "noise": cfg.noise.name,
@@ -138,14 +132,18 @@ def _evaluate(cfg, ppo: PPO, names: list[str], run_dir: Path, log: RunLog, say
         bar.update(len(results), f"success {np.mean(results):5.1%}")
 
     torch.manual_seed(derived_seed(cfg.seed, 2))  # eval.sample draws from torch's generator
-    env = batched_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
-                      num_envs=min(cfg.train.num_envs, len(goals)),
-                      states_hz=cfg.log.sim_state_hz, once=True)
+    env = learner.make_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
+                           num_envs=min(cfg.train.num_envs, len(goals)),
+                           states_hz=cfg.log.sim_state_hz, once=True)
+    def on_action(rec: dict) -> None:
+        log.write("/episode/action", rec)
+
+    names = [a.name for a in action_table(cfg.primitives)] if learner.per_action_log else None
     try:
-        summary = evaluate(env, ppo.actor, goals, on_episode=on_episode,
-                           on_action=lambda r: log.write("/episode/action", r),
-                           on_state=lambda r: log.write("/sim/state", r), action_names=names,
-                           sample=cfg.eval.sample)
+        summary = evaluate(env, learner.policy, goals, on_episode=on_episode,
+                           on_action=on_action if names else None,
+                           on_state=lambda r: log.write("/sim/state", r),
+                           action_names=names, sample=cfg.eval.sample)
     finally:
         bar.close()
         env.close()

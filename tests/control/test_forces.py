@@ -5,19 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inhand_exp.config import HandConfig, ObjectConfig, SimConfig
+from inhand_exp.config import HandConfig, ObjectConfig, PrimitivesConfig, SimConfig
 from inhand_exp.control.forces import Squeeze, solve_lp
 from inhand_exp.control.grasp import Contacts, Face, Posture, contact_frames, grasp_matrix
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.repose import Gains
 
 L, R = Face.LEFT, Face.RIGHT  # the pole's long sides
 G_ACC = SimConfig().gravity_mps2
 OBJ = ObjectConfig()
-GAINS = Gains()
+GAINS = PrimitivesConfig()
 MODEL = HandModel.from_config(HandConfig(), OBJ, G_ACC)
 MU = MODEL.mu * GAINS.friction_margin
-F_MIN, F_MAX = GAINS.f_min, GAINS.f_max
+F_MIN, F_MAX = GAINS.min_normal_force_n, GAINS.max_normal_force_n
 GRAVITY_WRENCH = np.array([0.0, OBJ.mass_kg * G_ACC, 0.0])  # what the contacts must supply
 # a three-point bend of the upright pole: finger 1 alone on the right, between the others
 BEND = Contacts(Posture((L, R, L)), (-0.12, 0.0, 0.12))
@@ -230,9 +229,9 @@ def test_landing_span_bounds_every_strict_hold(seed):
     spans = 0
     for finger in range(3):
         face = OPPOSITE[contacts.posture.faces[finger]]
-        span = landing_span(model, contacts, finger, face, Gains())
-        held = [c for c in grid
-                if strict_hold(model, contacts.moved(finger, coord=float(c), face=face), Gains())]
+        span = landing_span(model, contacts, finger, face, PrimitivesConfig())
+        held = [c for c in grid if strict_hold(
+            model, contacts.moved(finger, coord=float(c), face=face), PrimitivesConfig())]
         if span is None:
             assert held == []
             continue
@@ -242,8 +241,8 @@ def test_landing_span_bounds_every_strict_hold(seed):
         for c in (lo - 1e-3, hi + 1e-3):
             if abs(c) < 0.25:
                 assert not strict_hold(model, contacts.moved(finger, coord=c, face=face),
-                                       Gains())
+                                       PrimitivesConfig())
         if hi - lo > 0.02:  # well inside a wide span the grasp holds
             assert strict_hold(model, contacts.moved(finger, coord=(lo + hi) / 2, face=face),
-                               Gains())
+                               PrimitivesConfig())
     assert spans >= 1

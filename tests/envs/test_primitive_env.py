@@ -37,7 +37,7 @@ def test_mask_is_the_set_of_actions_the_primitives_accept(compose_cfg):
     pose, twist = env.world.object_state()
     q, qd = env.world.joint_state()
     obs = Observation(q, qd, pose, twist, 0.0)
-    expected = [make_primitive(a, env.model, BEND, env.gains, env.prim).start(obs) is None
+    expected = [make_primitive(a, env.model, BEND, env.prim).start(obs) is None
                 for a in env.actions]
     assert td["action_mask"].tolist() == expected
     assert any(expected) and not all(expected)
@@ -116,8 +116,8 @@ def test_training_episodes_mix_the_listed_groups(compose_cfg):
     for _ in range(12):
         mixed.reset()
         plain.reset()
-        groups.add(mixed.pair.group)
-        own.add(plain.pair.group)
+        groups.add(mixed.task.pair.group)
+        own.add(plain.task.pair.group)
     assert groups == {"medium", "hard"} and own == {"easy"}
 
 

@@ -6,10 +6,11 @@ import pytest
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from inhand_exp.config import PPOConfig
 from inhand_exp.envs.toy import ToyLineEnv
-from inhand_exp.learn.ppo import PPO, PPOParams
+from inhand_exp.learn.ppo import PPO
 
-SMALL = PPOParams(frames_per_batch=256, minibatch_size=64, epochs=4, hidden=(64, 64), lr=1e-3)
+SMALL = PPOConfig(frames_per_batch=256, minibatch_size=64, epochs=4, hidden=[64, 64], lr=1e-3)
 
 
 def success_rate(policy, episodes: int = 60, seed: int = 123) -> float:
@@ -73,7 +74,7 @@ def test_ppo_runs_on_the_primitive_environment(compose_cfg):
     from inhand_exp.envs.specs import OBS_DIM
 
     env = PrimitiveEnv(compose_cfg("goals=easy", "task.max_actions=4"), seed=0)
-    ppo = PPO(OBS_DIM, len(env.actions), PPOParams(frames_per_batch=8, minibatch_size=4,
+    ppo = PPO(OBS_DIM, len(env.actions), PPOConfig(frames_per_batch=8, minibatch_size=4,
                                                    epochs=1, hidden=(32, 32)))
     seen = []
     ppo.train(env, 16, progress=lambda i, m: seen.append(m))
@@ -93,7 +94,7 @@ def test_tiny_ppo_run_beats_random_on_easy_goals(compose_cfg):
 
     cfg = compose_cfg("goals=easy", "task.max_actions=8", "task.reward_progress=0.1",
                       "train.num_envs=8", "train.workers=2")
-    params = PPOParams(frames_per_batch=256, minibatch_size=64, epochs=8, lr=1e-3)
+    params = PPOConfig(frames_per_batch=256, minibatch_size=64, epochs=8, lr=1e-3)
     torch.manual_seed(0)
     ppo = PPO(18, 14, params)
     env = batched_env(cfg, seed=0)

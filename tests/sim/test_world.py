@@ -6,11 +6,11 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
+from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, PrimitivesConfig, SimConfig
 from inhand_exp.control.execute import Observation
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.repose import Gains, GraspPlan, Repose, min_jerk, repose_torques
+from inhand_exp.control.repose import GraspPlan, Repose, min_jerk, repose_torques
 from inhand_exp.sim.world import BODY_LINK, TIP_LINK, ObjectSpec, World
 
 # one ``World.step`` is one physics step here: the tests check the integration step by step
@@ -129,7 +129,7 @@ def test_deterministic(model):
 def test_hold_contacts_balance_gravity(world, model):
     q0 = model.grasp_q(BEND, POSE, press=0.0005)
     world.reset(POSE, q0)
-    gains = Gains()
+    gains = PrimitivesConfig()
     plan = GraspPlan.from_state(model, BEND, POSE, q0, gains)
 
     def hold(steps: int) -> None:

@@ -8,7 +8,6 @@ import pytest
 from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.repose import Gains
 from inhand_exp.control.sample import random_grasp
 from inhand_exp.sim.world import ObjectSpec, World
 from inhand_exp.task.actions import action_table, feasibility, make_primitive
@@ -64,7 +63,7 @@ def test_bend_grasp_mask(pole_setup):
     pose = np.array([0.0, 0.34, 0.0])
     world.reset(pose, model.grasp_q(contacts, pose, press=0.0005))
     actions = action_table(cfg.primitives)
-    mask, planned = feasibility(actions, model, contacts, Gains(), cfg.primitives,
+    mask, planned = feasibility(actions, model, contacts, cfg.primitives,
                                 observe(world))
     kinds = np.array([a.kind for a in actions])
     assert mask[kinds == "repose"].all()  # small reposes of a centred grasp are all reachable
@@ -90,17 +89,16 @@ def test_mask_agrees_with_execution(pole_setup, seed):
     world.reset(pose, q)
     actions = action_table(cfg.primitives)
     obs = observe(world)
-    mask, _ = feasibility(actions, model, contacts, Gains(), cfg.primitives, obs)
+    mask, _ = feasibility(actions, model, contacts, cfg.primitives, obs)
     for a in actions:
         if mask[a.index]:
             continue
-        out = execute(world, make_primitive(a, model, contacts, Gains(), cfg.primitives))
+        out = execute(world, make_primitive(a, model, contacts, cfg.primitives))
         assert out.reason == "infeasible" and out.steps == 0 and out.detail, (a.name, out)
     np.testing.assert_array_equal(world.object_pose(), obs.pose)
     for kind in ("repose", "slide"):
         allowed = [a for a in actions if a.kind == kind and mask[a.index]]
         if allowed:
-            out = execute(world, make_primitive(allowed[0], model, contacts, Gains(),
-                                                cfg.primitives))
+            out = execute(world, make_primitive(allowed[0], model, contacts, cfg.primitives))
             assert out.steps > 0 and out.reason != "infeasible", (allowed[0].name, out)
             contacts = model.measured(contacts, world.object_pose(), world.joint_q())

@@ -7,14 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from inhand_exp.config import HandConfig, ObjectConfig
+from inhand_exp.config import HandConfig, ObjectConfig, TaskConfig, typed
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import HandModel
-from inhand_exp.task.rules import Rules, flip_useful, pose_error, reached, reward, to_go
+from inhand_exp.task.rules import flip_useful, pose_error, reached, reward, to_go
 
 
-def test_rules_from_config(compose_cfg):
-    rules = Rules.from_config(compose_cfg("task.reward_goal=7", "task.max_actions=30").task)
+def test_rules_are_the_typed_task_config(compose_cfg):
+    rules = typed(compose_cfg("task.reward_goal=7", "task.max_actions=30").task, TaskConfig)
+    assert isinstance(rules, TaskConfig)
     assert (rules.reward_goal, rules.max_actions, rules.success_tol_m) == (7.0, 30, 0.01)
 
 
@@ -25,7 +26,7 @@ def test_rules_from_config(compose_cfg):
 ])
 def test_success_tolerances(offset, ok):
     goal = np.array([0.01, 0.2, 0.3])
-    assert reached(goal + np.array(offset), goal, Rules()) is ok
+    assert reached(goal + np.array(offset), goal, TaskConfig()) is ok
 
 
 def test_pose_error_wraps_the_angle():
@@ -34,7 +35,7 @@ def test_pose_error_wraps_the_angle():
 
 
 def test_reward_terms_add_up():
-    r = Rules()
+    r = TaskConfig()
     assert reward(r, valid=False, success=False, useful_flip=False) == pytest.approx(-0.01)
     assert reward(r, valid=True, success=True, useful_flip=False) == pytest.approx(5.0)
     assert reward(r, valid=True, success=False, useful_flip=True) == pytest.approx(1.0)
@@ -43,7 +44,7 @@ def test_reward_terms_add_up():
 
 
 def test_progress_shaping_telescopes_to_the_distance_covered():
-    rules = Rules(reward_progress=0.1)
+    rules = TaskConfig(reward_progress=0.1)
     goal = np.array([0.0, 0.2, 0.0])
     path = [np.array([0.05, 0.17, 0.4]), np.array([0.04, 0.18, 0.2]),
             np.array([0.06, 0.18, 0.3]), np.array([0.005, 0.2, 0.05])]

@@ -141,7 +141,7 @@ def hold_rates(cfg: DictConfig, seconds: float, seed: int) -> tuple[float, float
     deadline = time.perf_counter() + seconds
     while time.perf_counter() < deadline:
         contacts = bench.start(rng)
-        prim = trials.Repose(bench.model, contacts, np.zeros(3), 2.0, bench.gains)
+        prim = trials.Repose(bench.model, contacts, np.zeros(3), 2.0, bench.prim)
         world.step_wall_s = 0.0
         t = time.perf_counter()
         out = trials.execute(world, prim)

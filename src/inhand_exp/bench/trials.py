@@ -13,16 +13,17 @@ from dataclasses import dataclass
 import numpy as np
 from omegaconf import DictConfig
 
-from inhand_exp.config import ObjectConfig, PerturbConfig
+from inhand_exp.config import NoiseConfig, PerturbConfig
 from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, rotation
-from inhand_exp.control.hand import GeometryError, HandModel
+from inhand_exp.control.hand import GeometryError
 from inhand_exp.control.release_land import Land, Release
-from inhand_exp.control.repose import Gains, Repose
+from inhand_exp.control.repose import Repose
 from inhand_exp.control.sample import Workspace, pinch_grasp, random_grasp
 from inhand_exp.control.slide import Slide
-from inhand_exp.sim.world import ObjectSpec, World, wrap_angle
+from inhand_exp.sim.world import wrap_angle
+from inhand_exp.task.scene import build_scene
 
 HOLD_S = 10.0
 HOLD_TOL = (0.001, 0.01)  # m, rad
@@ -47,25 +48,11 @@ class Bench:
 
     def __init__(self, cfg: DictConfig, perturb: PerturbConfig | None = None,
                  noise: tuple[float, float] = (0.0, 0.0)):
-        obj = ObjectConfig(**{k: cfg.object[k] for k in cfg.object})
-        self.cfg, self.noise = cfg, noise
-        self.world = World(cfg.sim, cfg.hand, ObjectSpec.from_config(obj, perturb))
-        g = cfg.sim.gravity_mps2
-        self.model = HandModel.from_config(cfg.hand, obj, g)  # nominal: what controllers know
-        p = perturb or PerturbConfig()
-        true_obj = ObjectConfig(obj.name, obj.length_m * p.length_scale,
-                                obj.width_m * p.width_scale, obj.depth_m,
-                                obj.mass_kg * p.mass_scale, obj.friction)
-        self.true_model = HandModel.from_config(cfg.hand, true_obj, g)  # to touch the surface
-        self.workspace = Workspace.from_config(cfg.task)
-        prim = cfg.primitives
-        self.gains = Gains.from_config(prim)
-        self.settle_early = prim.settle_early
-        self.durations = {"repose": prim.repose_duration_s, "slide": prim.slide_duration_s,
-                          "flip": prim.flip_duration_s, "release": prim.release_duration_s,
-                          "land": prim.land_duration_s}
-        self.steps = {"repose": prim.repose_dx_m, "dz": prim.repose_dz_m,
-                      "dtheta": prim.repose_dtheta_rad, "slide": prim.slide_dc_m}
+        self.cfg = cfg
+        self.scene = build_scene(cfg, perturb, NoiseConfig("bench", *noise))
+        self.world, self.model = self.scene.world, self.scene.model  # nominal: the controllers'
+        self.true_model = self.scene.true_model  # the simulated object: to touch its surface
+        self.workspace, self.prim = self.scene.workspace, self.scene.prim
 
     def start(self, rng: np.random.Generator, pinch: int | None = None,
               workspace: Workspace | None = None, tries: int = 4000) -> Contacts:
@@ -81,8 +68,7 @@ class Bench:
 
     def offset(self, rng: np.random.Generator) -> np.ndarray:
         """Observation error on the object pose, held for one primitive."""
-        xz, th = self.noise
-        return rng.uniform([-xz, -xz, -th], [xz, xz, th])
+        return rng.uniform(-self.scene.noise, self.scene.noise)
 
     def observe(self) -> Observation:
         pose, twist = self.world.object_state()
@@ -110,7 +96,7 @@ def hold(b: Bench, rng: np.random.Generator) -> Trial:
     contacts = b.start(rng)
     start = b.world.object_pose()
     t = time.perf_counter()
-    out = execute(b.world, Repose(b.model, contacts, np.zeros(3), HOLD_S, b.gains),
+    out = execute(b.world, Repose(b.model, contacts, np.zeros(3), HOLD_S, b.prim),
                   b.offset(rng))
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and em <= HOLD_TOL[0] and er <= HOLD_TOL[1]
@@ -118,7 +104,7 @@ def hold(b: Bench, rng: np.random.Generator) -> Trial:
 
 
 def _unit_reposes(b: Bench) -> list[np.ndarray]:
-    dx, dz, dth = b.steps["repose"], b.steps["dz"], b.steps["dtheta"]
+    dx, dz, dth = b.prim.repose_dx_m, b.prim.repose_dz_m, b.prim.repose_dtheta_rad
     return [np.array(v) for v in ([dx, 0, 0], [-dx, 0, 0], [0, dz, 0], [0, -dz, 0],
                                   [0, 0, dth], [0, 0, -dth])]
 
@@ -133,7 +119,7 @@ def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
     offset = b.offset(rng)
     for k in rng.permutation(6):
         delta = _unit_reposes(b)[k]
-        prim = Repose(b.model, contacts, delta, b.durations["repose"], b.gains)
+        prim = Repose(b.model, contacts, delta, b.prim.repose_duration_s, b.prim)
         obs = b.observe()
         if _feasible(prim, Observation(obs.q, obs.qd, obs.pose + offset, obs.twist, 0.0)):
             break
@@ -141,7 +127,7 @@ def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
         return None
     start = b.world.object_pose()
     t = time.perf_counter()
-    out = execute(b.world, prim, offset, settle_early=b.settle_early)
+    out = execute(b.world, prim, offset, settle_early=b.prim.settle_early)
     em, er = _pose_error(b.world.object_pose(), start + delta)
     ok = out.ok and em <= REPOSE_TOL[0] and er <= REPOSE_TOL[1]
     return Trial(ok, out.dropped, em, er, out.sim_time_s,
@@ -151,17 +137,17 @@ def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
 def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
     """A random feasible slide of one finger by the configured step."""
     contacts = b.start(rng)
-    dc = b.steps["slide"]
+    dc = b.prim.slide_dc_m
     for k in rng.permutation(6):
         finger, sign = int(k // 2), (1 if k % 2 == 0 else -1)
-        prim = Slide(b.model, contacts, finger, sign * dc, b.durations["slide"], b.gains)
+        prim = Slide(b.model, contacts, finger, sign * dc, b.prim.slide_duration_s, b.prim)
         if _feasible(prim, b.observe()):
             break
     else:
         return None
     before = b.coords()
     t = time.perf_counter()
-    out = execute(b.world, prim, b.offset(rng), settle_early=b.settle_early)
+    out = execute(b.world, prim, b.offset(rng), settle_early=b.prim.settle_early)
     moved = b.coords() - before
     err = abs(float(moved[finger]) - sign * dc)
     in_contact = finger in b.faces()
@@ -187,7 +173,7 @@ def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 200,
             contacts = b.start(rng, pinch=finger, workspace=ws, tries=tries)
         except GeometryError:  # no pinch grasp found in this part of the workspace
             continue
-        prim = Flip(b.model, contacts, finger, b.durations["flip"], b.gains)
+        prim = Flip(b.model, contacts, finger, b.prim.flip_duration_s, b.prim)
         if _feasible(prim, b.observe()):
             break
     else:
@@ -207,7 +193,7 @@ def _releasable(b: Bench, rng: np.random.Generator) -> tuple[int, Release] | Non
     """A random grasp and a random finger whose release the primitive's own check allows."""
     contacts = b.start(rng)
     for finger in rng.permutation(3):
-        prim = Release(b.model, contacts, int(finger), b.durations["release"], b.gains)
+        prim = Release(b.model, contacts, int(finger), b.prim.release_duration_s, b.prim)
         if _feasible(prim, b.observe()):
             return int(finger), prim
     return None
@@ -235,7 +221,7 @@ def land(b: Bench, rng: np.random.Generator) -> Trial | None:
     if found is None or not execute(b.world, found[1]).ok:
         return None
     finger, released = found
-    prim = Land(b.model, released.result, finger, b.durations["land"], b.gains)
+    prim = Land(b.model, released.result, finger, b.prim.land_duration_s, b.prim)
     if not _feasible(prim, b.observe()):
         return None
     start = b.world.object_pose()

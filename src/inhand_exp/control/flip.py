@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.grasp import (
     Contacts,
     Face,
@@ -25,7 +26,6 @@ from inhand_exp.control.hand import HandModel
 from inhand_exp.control.handover import blended_forces, hover
 from inhand_exp.control.joint_path import FreeSpace, JointPath, arrival_times, plan_joint_path
 from inhand_exp.control.repose import (
-    Gains,
     GraspPlan,
     follow_qdd,
     landing_span,
@@ -50,7 +50,7 @@ def phase_times(duration_s: float, phases: dict[str, float]) -> dict[str, tuple[
     return times
 
 
-def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: Gains
+def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: PrimitivesConfig
                ) -> tuple[GraspPlan, GraspPlan] | str:
     """Plans with and without ``finger``, or why the other two cannot hold the object alone."""
     others = [j for j in range(3) if j != finger]
@@ -70,8 +70,8 @@ def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: Ga
 
 
 def handover_torques(model: HandModel, pair: GraspPlan, finger: int, mix, tracker,
-                     elbow: int, obs, origin: np.ndarray, gains: Gains, kp: float, kd: float
-                     ) -> np.ndarray | None:
+                     elbow: int, obs, origin: np.ndarray, gains: PrimitivesConfig, kp: float,
+                     kd: float) -> np.ndarray | None:
     """Torques while ``pair`` holds the object at ``origin`` and ``finger`` follows a path."""
     zero = np.zeros(3)
     acc, w_O = object_wrench(model, gains, obs.pose, obs.twist, (origin, zero, zero))
@@ -110,11 +110,12 @@ class Flip:
     """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
-                 gains: Gains | None = None, clearance_m: float = 0.02, press_m: float = 0.001,
-                 kp_joint: float = 900.0, kd_joint: float = 60.0, max_plans: int = 6,
+                 gains: PrimitivesConfig | None = None, clearance_m: float = 0.02,
+                 press_m: float = 0.001, kp_joint: float = 900.0, kd_joint: float = 60.0,
+                 max_plans: int = 6,
                  air_m: float = 0.006):
         self.model, self.contacts, self.finger = model, contacts, finger
-        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.duration_s, self.gains = duration_s, gains or PrimitivesConfig()
         self.clearance, self.press = clearance_m, press_m
         self.kp, self.kd = kp_joint, kd_joint
         self.max_plans = max_plans  # landings whose path is searched for, nearest first

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.flip import handover_torques, landed, pair_holds, phase_times
 from inhand_exp.control.grasp import Contacts, Face, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.handover import PathTracker, hover, route_round
-from inhand_exp.control.repose import Gains, GraspPlan, strict_hold
+from inhand_exp.control.repose import GraspPlan, strict_hold
 
 RELEASE_PHASES = {"unload": 0.35, "lift": 0.35}  # the rest holds still
 LAND_PHASES = {"travel": 0.5, "touch": 0.15, "load": 0.15}
@@ -25,10 +26,10 @@ class Release:
     """Primitive: lift ``finger`` off the object while the other two hold it."""
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
-                 gains: Gains | None = None, clearance_m: float = 0.02, kp_joint: float = 900.0,
-                 kd_joint: float = 60.0):
+                 gains: PrimitivesConfig | None = None, clearance_m: float = 0.02,
+                 kp_joint: float = 900.0, kd_joint: float = 60.0):
         self.model, self.contacts, self.finger = model, contacts, finger
-        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.duration_s, self.gains = duration_s, gains or PrimitivesConfig()
         self.clearance, self.kp, self.kd = clearance_m, kp_joint, kd_joint
         self.times = phase_times(duration_s, RELEASE_PHASES)
 
@@ -78,10 +79,11 @@ class Land:
     """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
-                 gains: Gains | None = None, clearance_m: float = 0.02, press_m: float = 0.001,
-                 kp_joint: float = 900.0, kd_joint: float = 60.0, step_m: float = 0.005):
+                 gains: PrimitivesConfig | None = None, clearance_m: float = 0.02,
+                 press_m: float = 0.001, kp_joint: float = 900.0, kd_joint: float = 60.0,
+                 step_m: float = 0.005):
         self.model, self.contacts, self.finger = model, contacts, finger
-        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.duration_s, self.gains = duration_s, gains or PrimitivesConfig()
         self.clearance, self.press, self.step = clearance_m, press_m, step_m
         self.kp, self.kd = kp_joint, kd_joint
         self.times = phase_times(duration_s, LAND_PHASES)

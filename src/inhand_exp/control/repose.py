@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.finger import FingerTerms
 from inhand_exp.control.forces import Squeeze, has_strict_squeeze, strict_span
 from inhand_exp.control.grasp import (
@@ -26,23 +27,6 @@ from inhand_exp.control.grasp import (
     rotation,
 )
 from inhand_exp.control.hand import HandModel
-
-
-@dataclass(frozen=True)
-class Gains:
-    """Object-pose PD gains (1/s^2, 1/s) and force-distribution limits (N)."""
-
-    kp: float = 400.0
-    kd: float = 40.0
-    f_min: float = 0.5
-    f_max: float = 50.0
-    friction_margin: float = 0.8
-
-    @classmethod
-    def from_config(cls, prim) -> Gains:
-        """From the ``primitives`` config group."""
-        return cls(prim.kp, prim.kd, prim.min_normal_force_n, prim.max_normal_force_n,
-                   prim.friction_margin)
 
 
 @dataclass(frozen=True)
@@ -66,7 +50,8 @@ class GraspPlan:
 
     @classmethod
     def from_state(cls, model: HandModel, contacts, pose: np.ndarray, q: np.ndarray,
-                   gains: Gains, sliding: int | None = None, drag: float = 0.0) -> GraspPlan:
+                   gains: PrimitivesConfig, sliding: int | None = None, drag: float = 0.0
+                   ) -> GraspPlan:
         """Plan for ``contacts`` (which fingers and faces) at the fingertips' measured places.
 
         Each active tip is projected onto its face: the contact coordinate comes from the
@@ -83,12 +68,12 @@ class GraspPlan:
         levers_O = tips_O + model.tip_radius * normals_O
         G = grasp_matrix(levers_O, normals_O)
         coupled = {k: drag for k, i in enumerate(fingers) if i == sliding}
-        sq = Squeeze.build(G, model.mu * gains.friction_margin, gains.f_min, gains.f_max,
-                           coupled, light=tuple(coupled))
+        sq = Squeeze.build(G, model.mu * gains.friction_margin, gains.min_normal_force_n,
+                           gains.max_normal_force_n, coupled, light=tuple(coupled))
         return cls(fingers, levers_O, normals_O, tips_O, sq)
 
 
-def plan_for(model: HandModel, contacts, obs, gains: Gains, sliding: int | None = None,
+def plan_for(model: HandModel, contacts, obs, gains: PrimitivesConfig, sliding: int | None = None,
              drag: float = 0.0) -> GraspPlan:
     """``GraspPlan.from_state`` on ``obs``, built once per observation when it carries a cache.
 
@@ -97,7 +82,7 @@ def plan_for(model: HandModel, contacts, obs, gains: Gains, sliding: int | None 
     """
     if obs.plans is None:
         return GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains, sliding, drag)
-    key = (id(model), contacts, gains, sliding, drag)
+    key = (id(model), contacts, id(gains), sliding, drag)
     plan = obs.plans.get(key)
     if plan is None:
         plan = GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains, sliding, drag)
@@ -105,7 +90,7 @@ def plan_for(model: HandModel, contacts, obs, gains: Gains, sliding: int | None 
     return plan
 
 
-def strict_hold(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
+def strict_hold(model: HandModel, contacts: Contacts, gains: PrimitivesConfig) -> bool:
     """True when ``contacts`` (as commanded, active fingers only) admit a squeeze strictly inside
     the friction cones: the grasp holds whatever the small wrenches a controller asks for."""
     act = [i for i in range(3) if contacts.active[i]]
@@ -113,7 +98,7 @@ def strict_hold(model: HandModel, contacts: Contacts, gains: Gains) -> bool:
     return has_strict_squeeze(grasp_matrix(pts[act], nrm[act]), model.mu * gains.friction_margin)
 
 
-def landing_span(model: HandModel, contacts: Contacts, finger: int, face, gains: Gains
+def landing_span(model: HandModel, contacts: Contacts, finger: int, face, gains: PrimitivesConfig
                  ) -> tuple[float, float] | None:
     """Bounds on the coordinates along ``face`` where ``finger`` can join the other contacts in
     a grasp that ``strict_hold`` accepts (two LPs, ``forces.strict_span``): a search over
@@ -141,7 +126,7 @@ def min_jerk(start: np.ndarray, goal: np.ndarray, duration: float, t: float
     return p, v, a
 
 
-def object_wrench(model: HandModel, gains: Gains, pose: np.ndarray, twist: np.ndarray,
+def object_wrench(model: HandModel, gains: PrimitivesConfig, pose: np.ndarray, twist: np.ndarray,
                   ref: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Desired object acceleration (world) and the contact wrench that causes it (object frame).
 
@@ -222,7 +207,7 @@ def follow_qdd(model: HandModel, i: int, q: np.ndarray, qd: np.ndarray, tip_O: n
     return np.array(damped_qdd(_terms(model, i, q, qd), ax, az))
 
 
-def repose_torques(model: HandModel, plan: GraspPlan, gains: Gains, q: np.ndarray,
+def repose_torques(model: HandModel, plan: GraspPlan, gains: PrimitivesConfig, q: np.ndarray,
                    qd: np.ndarray, pose: np.ndarray, twist: np.ndarray,
                    ref: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray | None:
     """Joint torques (6,) for the fingers in ``plan``; None when the forces are infeasible.
@@ -258,10 +243,10 @@ class Repose:
     """
 
     def __init__(self, model: HandModel, contacts, delta: np.ndarray, duration_s: float,
-                 gains: Gains | None = None, move_fraction: float = 0.7,
+                 gains: PrimitivesConfig | None = None, move_fraction: float = 0.7,
                  tol: tuple[float, float] = (0.002, 0.02)):
         self.model, self.contacts, self.delta = model, contacts, np.asarray(delta, float)
-        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.duration_s, self.gains = duration_s, gains or PrimitivesConfig()
         self.move_s = move_fraction * duration_s
         self.tol = tol
 

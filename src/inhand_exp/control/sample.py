@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.repose import Gains, strict_hold
+from inhand_exp.control.repose import strict_hold
 
 
 @dataclass(frozen=True)
@@ -116,7 +117,7 @@ def grasp_of(model: HandModel, posture: Posture, pose: np.ndarray,
             if not min(a, b) < c[k] < max(a, b):
                 continue
         cands.append(c)
-    gains = Gains()
+    gains = PrimitivesConfig()
     for c in cands:
         contacts = Contacts(posture, c)
         if strict_hold(model, contacts, gains) and holds_at(model, contacts, pose,
@@ -169,7 +170,7 @@ def pinch_grasp(model: HandModel, rng: np.random.Generator, finger: int,
     the start of a flip or a release of ``finger``. Returns ``(pose, contacts, q)``."""
     ws = workspace or Workspace()
     a, b = (j for j in range(3) if j != finger)
-    gains = Gains()
+    gains = PrimitivesConfig()
     for _ in range(max_tries):
         pose = ws.draw(rng)
         faces = [Face.LEFT, Face.LEFT, Face.LEFT]

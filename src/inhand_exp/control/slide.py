@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.grasp import Contacts, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
-    Gains,
     at_rest,
     contact_force,
     damped_qdd,
@@ -33,11 +33,11 @@ class Slide:
     """Primitive: move ``finger``'s contact by ``dc`` metres along its face."""
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, dc: float,
-                 duration_s: float, gains: Gains | None = None, kp: float = 900.0,
+                 duration_s: float, gains: PrimitivesConfig | None = None, kp: float = 900.0,
                  kd: float = 60.0, move_fraction: float = 0.7,
                  max_push_n: float = 1.5, min_bend: float = 0.3):
         self.model, self.contacts, self.finger, self.dc = model, contacts, finger, dc
-        self.duration_s, self.gains = duration_s, gains or Gains()
+        self.duration_s, self.gains = duration_s, gains or PrimitivesConfig()
         self.kp, self.kd = kp, kd
         self.move_s = move_fraction * duration_s
         self.max_push = max_push_n

@@ -11,8 +11,6 @@ tensors and plain numbers, so it loads with ``torch.load(weights_only=True)``.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -24,37 +22,17 @@ from torchrl.modules import MLP, MaskedCategorical, ProbabilisticActor, ValueOpe
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
+from inhand_exp.config import PPOConfig, typed
+from inhand_exp.envs.batched import batched_env
+from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.learn.features import HandGeometry, ObservationFeatures
-
-Progress = Callable[[int, dict[str, float]], None]
+from inhand_exp.learn.registry import Progress
+from inhand_exp.task.actions import action_table
+from inhand_exp.task.goals import GoalPair
 
 
 class CheckpointError(ValueError):
     """A checkpoint that does not fit this configuration."""
-
-
-@dataclass
-class PPOParams:
-    """The learner's hyper-parameters (see ``config.PPOConfig`` for their meaning)."""
-
-    lr: float = 3e-4
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_epsilon: float = 0.2
-    entropy_coef: float = 0.01
-    critic_coef: float = 0.5
-    hidden: tuple[int, ...] = (256, 256, 256)
-    frames_per_batch: int = 1024
-    epochs: int = 4
-    minibatch_size: int = 256
-    max_grad_norm: float = 1.0
-
-    @classmethod
-    def from_config(cls, learner) -> PPOParams:
-        return cls(learner.lr, learner.gamma, learner.gae_lambda, learner.clip_epsilon,
-                   learner.entropy_coef, learner.critic_coef, tuple(learner.hidden),
-                   learner.frames_per_batch, learner.epochs, learner.minibatch_size,
-                   learner.max_grad_norm)
 
 
 class FeatureMLP(nn.Module):
@@ -89,14 +67,26 @@ def make_networks(obs_dim: int, n_actions: int, hidden: tuple[int, ...],
     return actor, critic
 
 
-class PPO:
-    """Networks, loss and optimiser; ``train`` runs the collector loop, ``state_dict`` resumes."""
+def from_config(cfg) -> PPO:
+    """The mid-level PPO learner of ``cfg`` (the ``learner.ppo`` entry of the registry)."""
+    params = typed(cfg.learner, PPOConfig)
+    hand = HandGeometry.from_config(cfg.hand) if params.grasp_features else None
+    return PPO(OBS_DIM, len(action_table(cfg.primitives)), params, hand)
 
-    def __init__(self, obs_dim: int, n_actions: int, params: PPOParams,
+
+class PPO:
+    """Networks, loss and optimiser; ``train`` runs the collector loop, ``state_dict`` resumes.
+
+    A ``learn.registry.Learner``: it acts in the batched mid-level environment.
+    """
+
+    per_action_log = True
+
+    def __init__(self, obs_dim: int, n_actions: int, params: PPOConfig,
                  hand: HandGeometry | None = None):
         self.params, self.obs_dim, self.n_actions = params, obs_dim, n_actions
         self.grasp_features = hand is not None
-        self.actor, self.critic = make_networks(obs_dim, n_actions, params.hidden, hand)
+        self.actor, self.critic = make_networks(obs_dim, n_actions, tuple(params.hidden), hand)
         self.advantage = GAE(gamma=params.gamma, lmbda=params.gae_lambda,
                              value_network=self.critic)
         self.loss = ClipPPOLoss(self.actor, self.critic, clip_epsilon=params.clip_epsilon,
@@ -104,6 +94,17 @@ class PPO:
                                 critic_coeff=params.critic_coef, normalize_advantage=True)
         self.optim = torch.optim.Adam(self.loss.parameters(), lr=params.lr)
         self.iteration, self.frames = 0, 0
+
+    @property
+    def policy(self) -> ProbabilisticActor:
+        return self.actor
+
+    @staticmethod
+    def make_env(cfg, seed: int, goals: list[GoalPair] | None = None,
+                 num_envs: int | None = None, states_hz: float = 0.0,
+                 once: bool = False) -> EnvBase:
+        return batched_env(cfg, seed, goals=goals, num_envs=num_envs, states_hz=states_hz,
+                           once=once)
 
     def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:

@@ -13,12 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.execute import Observation, Primitive
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.release_land import Land, Release
-from inhand_exp.control.repose import Gains, Repose
+from inhand_exp.control.repose import Repose
 from inhand_exp.control.slide import Slide
 
 
@@ -54,24 +55,25 @@ def action_table(prim) -> tuple[Action, ...]:
     return tuple(Action(index=k, **spec) for k, spec in enumerate(specs))
 
 
-def make_primitive(action: Action, model: HandModel, contacts: Contacts, gains: Gains,
-                   prim) -> Primitive:
-    """A fresh primitive carrying out ``action`` from ``contacts``."""
+def make_primitive(action: Action, model: HandModel, contacts: Contacts,
+                   prim: PrimitivesConfig) -> Primitive:
+    """A fresh primitive carrying out ``action`` from ``contacts``, with the durations, gains and
+    force limits of ``prim``."""
     if action.kind == "repose":
-        return Repose(model, contacts, np.array(action.delta), prim.repose_duration_s, gains)
+        return Repose(model, contacts, np.array(action.delta), prim.repose_duration_s, prim)
     if action.kind == "slide":
-        return Slide(model, contacts, action.finger, action.dc, prim.slide_duration_s, gains)
+        return Slide(model, contacts, action.finger, action.dc, prim.slide_duration_s, prim)
     if action.kind == "flip":
-        return Flip(model, contacts, action.finger, prim.flip_duration_s, gains)
+        return Flip(model, contacts, action.finger, prim.flip_duration_s, prim)
     if action.kind == "release":
-        return Release(model, contacts, action.finger, prim.release_duration_s, gains)
+        return Release(model, contacts, action.finger, prim.release_duration_s, prim)
     if action.kind == "land":
-        return Land(model, contacts, action.finger, prim.land_duration_s, gains)
+        return Land(model, contacts, action.finger, prim.land_duration_s, prim)
     raise ValueError(f"unknown action kind {action.kind!r}")
 
 
 def feasibility(actions: tuple[Action, ...], model: HandModel, contacts: Contacts,
-                gains: Gains, prim, obs: Observation) -> tuple[np.ndarray, list]:
+                prim: PrimitivesConfig, obs: Observation) -> tuple[np.ndarray, list]:
     """Which actions the filter allows in ``obs``, and the primitives already planned for them.
 
     An action is feasible when its primitive's ``start`` accepts the observed state; the
@@ -82,7 +84,7 @@ def feasibility(actions: tuple[Action, ...], model: HandModel, contacts: Contact
     mask = np.zeros(len(actions), dtype=bool)
     planned: list = [None] * len(actions)
     for a in actions:
-        p = make_primitive(a, model, contacts, gains, prim)
+        p = make_primitive(a, model, contacts, prim)
         if p.start(obs) is None:
             mask[a.index], planned[a.index] = True, p
     return mask, planned

@@ -1,33 +1,17 @@
-"""Success, rewards and the paper's "useful flip" (section IV-A), from the simulated state."""
+"""Success, rewards and the paper's "useful flip" (section IV-A), from the simulated state.
+
+The tolerances and rewards are the ``task`` config (``config.TaskConfig``).
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
+from inhand_exp.config import TaskConfig
 from inhand_exp.control.grasp import Contacts, contact_frames, cross2
 from inhand_exp.control.hand import HandModel
-
-
-@dataclass(frozen=True)
-class Rules:
-    """Tolerances (m, rad), rewards and the time limit in mid-level actions."""
-
-    success_tol_m: float = 0.01
-    success_tol_rad: float = 0.1
-    reward_goal: float = 5.0
-    reward_invalid: float = -0.01
-    reward_flip: float = 1.0
-    max_actions: int = 50
-    reward_progress: float = 0.0  # per tolerance of progress (0: the paper's sparse reward)
-
-    @classmethod
-    def from_config(cls, task) -> Rules:
-        return cls(task.success_tol_m, task.success_tol_rad, task.reward_goal,
-                   task.reward_invalid, task.reward_flip, task.max_actions,
-                   task.reward_progress)
 
 
 def pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float, float]:
@@ -36,7 +20,7 @@ def pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float, float]
     return abs(float(goal[0]) - float(pose[0])), abs(float(goal[1]) - float(pose[1])), abs(dth)
 
 
-def reached(pose: np.ndarray, goal: np.ndarray, rules: Rules) -> bool:
+def reached(pose: np.ndarray, goal: np.ndarray, rules: TaskConfig) -> bool:
     """Success: |dx|, |dz| < tol_m and |dtheta| < tol_rad (paper: 1 cm, 0.1 rad)."""
     ex, ez, eth = pose_error(pose, goal)
     return ex < rules.success_tol_m and ez < rules.success_tol_m and eth < rules.success_tol_rad
@@ -56,13 +40,13 @@ def flip_useful(model: HandModel, contacts: Contacts, finger: int, pose: np.ndar
     return torque * to_go > 0
 
 
-def to_go(pose: np.ndarray, goal: np.ndarray, rules: Rules) -> float:
+def to_go(pose: np.ndarray, goal: np.ndarray, rules: TaskConfig) -> float:
     """Distance to the goal in tolerances: |dx|/tol_m + |dz|/tol_m + |dtheta|/tol_rad."""
     ex, ez, eth = pose_error(pose, goal)
     return (ex + ez) / rules.success_tol_m + eth / rules.success_tol_rad
 
 
-def reward(rules: Rules, *, valid: bool, success: bool, useful_flip: bool,
+def reward(rules: TaskConfig, *, valid: bool, success: bool, useful_flip: bool,
            progress: float = 0.0) -> float:
     """The paper's reward: +5 goal, -0.01 invalid action, +1 useful successful flip.
 

@@ -1,0 +1,138 @@
+"""The task of the paper (section IV), in the manner of dm_control's ``Task``: bring the object
+from X0 to Xg and never drop it.
+
+``GoalTask`` owns what every environment of the task shares, whatever its action is (a
+primitive for the mid level, six torques end to end):
+
+- the episode's pair: fixed goals taken in order (evaluation), or a fresh training pair drawn
+  from the ``goals`` group (or from a group of ``goals.train_groups``);
+- the reset: the world put at X0 with the fingertips on the simulated object's surface;
+- success (|dx|, |dz| < tol_m and |dtheta| < tol_rad, from the simulated pose), the drop (given
+  by the caller, judged from PyBullet's contacts), the reward and the time limit: at most
+  ``max_actions`` actions (the mid level: ``task.max_actions``) or ``time_limit_s`` simulated
+  seconds (end to end: ``task.time_limit_s``).
+
+An environment is then a thin sequencer: reset the task, act, ``judge``, observe.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from inhand_exp.control.hand import GeometryError
+from inhand_exp.task.goals import GoalPair, sample_pair
+from inhand_exp.task.rules import reached, reward, to_go
+from inhand_exp.task.scene import Scene
+
+PRESS_M = 0.0005  # initial fingertip press into the surface (m)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """How the last action left the episode."""
+
+    success: bool
+    dropped: bool
+    terminated: bool  # success or drop
+    truncated: bool  # the time limit, without success or drop
+    reward: float
+
+
+class GoalTask:
+    """Episodes of one scene: ``reset`` starts the next one, ``judge`` scores each action.
+
+    ``goals``: the pairs to play in order (evaluation); None draws training pairs from
+    ``groups`` with ``hard_posture`` (see ``goals.sample_pair``). ``once``: play each of
+    ``goals`` once, after which ``reset`` returns False. An episode ends after ``max_actions``
+    actions or ``time_limit_s`` simulated seconds, whichever comes first (None: no such limit).
+    """
+
+    def __init__(self, scene: Scene, groups: tuple[str, ...] = ("medium",),
+                 hard_posture: str = "other", goals: list[GoalPair] | None = None,
+                 once: bool = False, max_actions: int | None = None,
+                 time_limit_s: float | None = None):
+        self.scene, self.rules = scene, scene.rules
+        self.groups, self.hard_posture = tuple(groups), hard_posture
+        self.goals, self.once = goals, once and goals is not None
+        self.max_actions, self.time_limit_s = max_actions, time_limit_s
+        self.episode = 0  # episodes started
+        self.pair: GoalPair | None = None
+        self.goal = np.zeros(3)
+        self.n_actions, self.n_invalid, self.sim_time = 0, 0, 0.0
+        self.success = self.dropped = False
+
+    @classmethod
+    def from_config(cls, scene: Scene, cfg, end_to_end: bool = False, **kwargs) -> GoalTask:
+        """The task of the ``goals`` config group for ``scene``; its time limit is
+        ``task.max_actions`` mid-level actions, or ``task.time_limit_s`` ``end_to_end``."""
+        goals = cfg["goals"]
+        limit = ({"time_limit_s": scene.rules.time_limit_s} if end_to_end
+                 else {"max_actions": scene.rules.max_actions})
+        return cls(scene, tuple(goals["train_groups"]) or (goals["name"],),
+                   goals["hard_goal_posture"], **limit, **kwargs)
+
+    @property
+    def exhausted(self) -> bool:
+        """Every pair of ``goals`` has been played (``once`` only)."""
+        return self.once and self.episode >= len(self.goals)
+
+    def next_pair(self, rng: np.random.Generator) -> GoalPair:
+        if self.goals is not None:
+            return self.goals[self.episode % len(self.goals)]
+        group = self.groups[int(rng.integers(len(self.groups)))] if len(self.groups) > 1 \
+            else self.groups[0]
+        s = self.scene
+        return sample_pair(s.model, group, rng, s.workspace, self.hard_posture,
+                           (s.rules.success_tol_m, s.rules.success_tol_rad))
+
+    def reset(self, rng: np.random.Generator) -> bool:
+        """Start the next episode: the object at X0, the fingers on its simulated surface, at
+        rest. False (and nothing simulated) once ``goals`` are exhausted.
+
+        Pairs are drawn on the nominal object; under a perturbation (a thicker pole) the same
+        contacts may not fit the simulated one with the links clear. A training draw is then
+        drawn again; a pair of ``goals`` is refused with ``GeometryError`` naming it.
+        """
+        if self.exhausted:
+            return False
+        s = self.scene
+        for tries in range(1, 101):
+            pair = self.next_pair(rng)
+            try:  # the grasp is drawn on the nominal object; the fingers touch the simulated one
+                q = s.true_model.grasp_q(pair.contacts, pair.x0, PRESS_M)
+                break
+            except GeometryError as err:
+                if self.goals is not None or tries == 100:
+                    raise GeometryError(f"goal pair {self.episode}: the simulated object cannot "
+                                        f"be held at X0 with its grasp: {err}") from None
+        self.episode += 1
+        self.pair, self.goal = pair, pair.xg.copy()
+        s.world.reset(pair.x0, q)
+        self.n_actions, self.n_invalid, self.sim_time = 0, 0, 0.0
+        self.success = self.dropped = False
+        return True
+
+    def to_go(self, pose: np.ndarray) -> float:
+        """Distance of ``pose`` to the goal, in tolerances (the progress potential)."""
+        return to_go(pose, self.goal, self.rules)
+
+    def judge(self, dropped: bool, sim_time_s: float, valid: bool = True,
+              useful_flip: bool = False, before: float | None = None) -> Verdict:
+        """Score one action that took ``sim_time_s`` and ended with ``dropped`` (the object no
+        longer held, as the simulator says). Success is read from the simulated pose.
+        ``before``: ``to_go`` before the action, for the progress shaping."""
+        self.n_actions += 1
+        self.n_invalid += not valid
+        self.sim_time += sim_time_s
+        pose = self.scene.world.object_pose()
+        self.dropped = bool(dropped)
+        self.success = not self.dropped and reached(pose, self.goal, self.rules)
+        terminated = self.success or self.dropped
+        out_of_time = (self.max_actions is not None and self.n_actions >= self.max_actions) or (
+            self.time_limit_s is not None and self.sim_time >= self.time_limit_s - 1e-9)
+        progress = 0.0 if before is None else before - self.to_go(pose)
+        r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful_flip,
+                   progress=progress)
+        return Verdict(self.success, self.dropped, terminated, not terminated and out_of_time, r)

@@ -1,0 +1,23 @@
+"""The learner seam: the registry builds learners by name and refuses unknown ones."""
+
+from __future__ import annotations
+
+import pytest
+from omegaconf import OmegaConf
+
+from inhand_exp.config import ConfigError
+from inhand_exp.learn.ppo import PPO
+from inhand_exp.learn.registry import LEARNERS, make_learner
+
+
+def test_registry_builds_ppo_from_the_config(compose_cfg):
+    learner = make_learner(compose_cfg("learner.hidden=[32,32]"))
+    assert isinstance(learner, PPO) and learner.params.hidden == [32, 32]
+    assert learner.per_action_log and learner.policy is learner.actor
+
+
+def test_registry_refuses_an_unknown_name_listing_the_known_ones():
+    with pytest.raises(ConfigError) as err:
+        make_learner(OmegaConf.create({"learner": {"name": "sac"}}))
+    for name in LEARNERS:
+        assert name in str(err.value)

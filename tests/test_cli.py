@@ -109,13 +109,14 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
         (["mode=eval"], "mode=eval needs checkpoint=PATH"),
         (["mode=eval", f"checkpoint={tmp_path / 'missing.pt'}"], "not found"),
         (["mode=eval", f"checkpoint={policy}", "object=cube"], "this configuration has"),
-        (["learner=ddpg"], "learner=ddpg is not built yet"),
+        (["mode=eval", f"checkpoint={policy}", "learner=ddpg"],
+         "this configuration has learner=ddpg"),
         (["mode=eval", f"checkpoint={policy}", f"eval.goals_file={tmp_path / 'no.csv'}"],
          "not found"),
     ]):
         run_dir = tmp_path / f"bad{k}"
         bad = inhand_exp(*args, f"hydra.run.dir={run_dir}", cwd=tmp_path,
-                         fast=args != ["learner=ddpg"])  # the fast budget is PPO's
+                         fast="learner=ddpg" not in args)  # the fast budget is PPO's
         assert bad.returncode == 2 and message in bad.stderr, (args, bad.stderr)
         assert "Traceback" not in bad.stderr
         if "configuration has" not in message:  # refused before anything was written
@@ -179,3 +180,26 @@ def test_resume_refuses_what_it_cannot_resume(tmp_path):
         assert res.returncode == 2 and message in res.stderr, res.stderr
         assert "Traceback" not in res.stderr
     assert sorted(p.name for p in (tmp_path / "early").iterdir()) == [".hydra"]
+
+
+def test_ddpg_trains_and_evaluates_end_to_end_with_the_same_logs(tmp_path):
+    """learner=ddpg: the torque env, /train/iteration with DDPG's losses, /eval/episode with
+    the fields PPO's evaluation writes, and no per-action records."""
+    ppo = inhand_exp(f"hydra.run.dir={tmp_path / 'ppo'}", cwd=tmp_path)
+    assert ppo.returncode == 0, ppo.stderr
+    res = inhand_exp("learner=ddpg", "train.frames=16", "learner.frames_per_batch=8",
+                     "learner.warmup_frames=8", "learner.batch_size=4",
+                     "learner.updates_per_batch=2", "learner.train_pool=1", "train.num_envs=2",
+                     "train.backend=serial", "eval.episodes=1", "task.time_limit_s=0.5",
+                     f"hydra.run.dir={tmp_path / 'ddpg'}", cwd=tmp_path, fast=False)
+    assert res.returncode == 0, res.stderr
+    log = read_log(tmp_path / "ddpg" / "run.mcap")
+    iterations = log.topic("/train/iteration")
+    assert [m["frames"] for m in iterations] == [8, 16]
+    assert set(iterations[-1]["losses"]) == {"loss_actor", "loss_value"}
+    (episode,) = log.topic("/eval/episode")
+    (reference,) = read_log(tmp_path / "ppo" / "run.mcap").topic("/eval/episode")
+    assert set(episode) == set(reference) and episode["learner"] == "ddpg"
+    assert episode["sim_time_s"] <= 0.5 + 1e-6
+    assert log.topic("/episode/action") == []
+    assert (tmp_path / "ddpg" / "policy.pt").is_file()

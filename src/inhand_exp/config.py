@@ -192,6 +192,13 @@ class DDPGConfig(LearnerConfig):
                                   ge=0)
     control_period_s: float = spec(1 / 60, "Torque-policy period (s), a whole number of steps.",
                                    gt=0)
+    train_pool: int = spec(64, "Training pairs each environment draws and then replays "
+                           "uniformly: an end-to-end episode can end in a fraction of a second, "
+                           "and drawing a pair takes about 0.2 s.", ge=0)
+    warmup_frames: int = spec(10_000, "Frames of uniformly random torques before the policy "
+                              "acts (fills the replay buffer).", ge=0)
+    frames_per_batch: int = spec(1024, "Frames collected per iteration.", gt=0)
+    updates_per_batch: int = spec(256, "Gradient steps per collected batch.", gt=0)
 
 
 @dataclass
@@ -366,7 +373,7 @@ def _check_consistency(cfg: DictConfig) -> None:
     """Cross-field rules: matching object and primitives, whole step ratios, joint limits."""
     if cfg.mode == Mode.eval and not cfg.checkpoint:
         raise ConfigError("mode=eval needs checkpoint=PATH (a policy.pt of an earlier run)")
-    if cfg.learner.name == "ppo" and cfg.learner.frames_per_batch % cfg.train.num_envs:
+    if "frames_per_batch" in cfg.learner and cfg.learner.frames_per_batch % cfg.train.num_envs:
         raise ConfigError(f"learner.frames_per_batch={cfg.learner.frames_per_batch} must be a "
                           f"multiple of train.num_envs={cfg.train.num_envs}")
     if cfg.object.name != cfg.primitives.name:

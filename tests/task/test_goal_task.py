@@ -99,3 +99,18 @@ def test_training_pairs_come_from_the_config_groups_with_fingers_on_the_true_sur
         assert e2e.max_actions is None and e2e.time_limit_s == cfg.task.time_limit_s
     finally:
         scene.close()
+
+
+def test_a_pool_replays_the_first_training_pairs(scene):
+    task = GoalTask(scene, groups=("easy",), pool=2, max_actions=5)
+    rng = np.random.default_rng(3)
+    first = []
+    for _ in range(2):
+        task.reset(rng)
+        first.append(task.pair)
+    later = set()
+    for _ in range(8):
+        task.reset(rng)
+        assert any(task.pair is p for p in first)
+        later.add(id(task.pair))
+    assert len(later) == 2  # both are replayed

@@ -60,6 +60,8 @@ class WorldLike(Protocol):
 
 StateCheck = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], "str | None"]
 
+DROP_GRACE_S = 0.05  # a grasp lost for this long (s) is a drop
+
 # How every primitive can end. A drop is lost_contact or unstable.
 REASONS = ("done", "infeasible", "lost_contact", "unstable", "timeout", "link_contact")
 
@@ -107,7 +109,7 @@ def joint_hold(q_ref: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: float = 40.
 
 
 def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | None = None,
-            check_every: int = 4, drop_grace_s: float = 0.05,
+            check_every: int = 4, drop_grace_s: float = DROP_GRACE_S,
             state_check: StateCheck = state_problem, started: bool = False,
             fall_m: float = 0.02, settle_s: float = 0.25, settle_early: bool = False) -> Outcome:
     """Drive ``primitive`` for its duration; stop early on infeasibility, a drop or instability.

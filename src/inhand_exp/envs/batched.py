@@ -1,4 +1,7 @@
-"""Many primitive environments at once: ``workers`` processes, each stepping a ``SerialEnv``.
+"""Many environments at once: ``workers`` processes, each stepping a ``SerialEnv``.
+
+The environments are mid-level ``PrimitiveEnv`` by default, or any class built as
+``cls(cfg, goals=..., states_hz=..., once=...)`` (the end-to-end ``TorqueEnv``).
 
 The batch has shape ``(workers, num_envs // workers)``. The ``parallel`` backend runs each row in
 its own process (``ParallelEnv``); ``serial`` runs everything in this process, with the same
@@ -48,14 +51,15 @@ class SleepyParallelEnv(ParallelEnv):
         return super()._wait_for_workers(workers_range)
 
 
-def _make_env(cfg: dict, goals: list[GoalPair] | None = None,
-              states_hz: float = 0.0, once: bool = False) -> PrimitiveEnv:
-    return PrimitiveEnv(OmegaConf.create(cfg), goals=goals, states_hz=states_hz, once=once)
+def _make_env(cfg: dict, goals: list[GoalPair] | None = None, states_hz: float = 0.0,
+              once: bool = False, env_class: type[EnvBase] = PrimitiveEnv) -> EnvBase:
+    return env_class(OmegaConf.create(cfg), goals=goals, states_hz=states_hz, once=once)
 
 
 def _make_row(cfg: dict, goals: list[list[GoalPair]] | None, per: int,
-              states_hz: float, once: bool = False) -> SerialEnv:
-    kwargs = [{"cfg": cfg, "states_hz": states_hz, "once": once,
+              states_hz: float, once: bool = False,
+              env_class: type[EnvBase] = PrimitiveEnv) -> SerialEnv:
+    kwargs = [{"cfg": cfg, "states_hz": states_hz, "once": once, "env_class": env_class,
                "goals": None if goals is None else goals[j]} for j in range(per)]
     return SerialEnv(per, _make_env, create_env_kwargs=kwargs)
 
@@ -88,8 +92,9 @@ def split_goals(goals: list[GoalPair], n: int) -> list[list[GoalPair]]:
 
 def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
                 num_envs: int | None = None, states_hz: float = 0.0,
-                once: bool = False) -> EnvBase:
-    """The batched primitive environment for ``cfg`` (``train.backend``), seeded with ``seed``.
+                once: bool = False, env_class: type[EnvBase] = PrimitiveEnv) -> EnvBase:
+    """The batched ``env_class`` environment for ``cfg`` (``train.backend``), seeded with
+    ``seed``.
 
     ``goals``: a fixed goal set, dealt round-robin over the environments (see ``split_goals``);
     without it every episode draws a training pair. ``once``: each environment idles after its
@@ -102,7 +107,7 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
         dealt = split_goals(goals, workers * per)
         rows = [dealt[w * per:(w + 1) * per] for w in range(workers)]
     kwargs = [{"cfg": plain, "goals": rows[w], "per": per, "states_hz": states_hz,
-               "once": once} for w in range(workers)]
+               "once": once, "env_class": env_class} for w in range(workers)]
     backend = str(getattr(cfg.train.backend, "value", cfg.train.backend))
     if backend == "serial":
         env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)

@@ -166,7 +166,7 @@ class PPO:
         return {"actor": self.actor.state_dict(), "critic": self.critic.state_dict(),
                 "optim": self.optim.state_dict(), "iteration": self.iteration,
                 "frames": self.frames, "obs_dim": self.obs_dim, "n_actions": self.n_actions,
-                "grasp_features": self.grasp_features,
+                "grasp_features": self.grasp_features, "learner": "ppo",
                 "torch_rng": torch.get_rng_state()}
 
     def save(self, path: Path) -> None:
@@ -180,6 +180,9 @@ class PPO:
         if not path.is_file():
             raise FileNotFoundError(f"checkpoint {path} not found")
         state = torch.load(path, weights_only=True)
+        if state.get("learner", "ppo") != "ppo":
+            raise CheckpointError(f"checkpoint {path} was trained by learner="
+                                  f"{state['learner']}; this configuration has learner=ppo")
         if (state["obs_dim"], state["n_actions"]) != (self.obs_dim, self.n_actions):
             raise CheckpointError(
                 f"checkpoint {path} is for {state['obs_dim']} observations and "

@@ -52,6 +52,7 @@ class Learner(Protocol):
 # learner.name -> "module:factory"; factory(cfg) -> Learner
 LEARNERS = {
     "ppo": "inhand_exp.learn.ppo:from_config",
+    "ddpg": "inhand_exp.learn.ddpg:from_config",
 }
 
 

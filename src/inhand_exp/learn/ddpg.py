@@ -1,0 +1,179 @@
+"""DDPG, the end-to-end baseline (paper section IV-A): joint torques from the observation.
+
+TorchRL's ``DDPGLoss`` with target networks for actor and critic (soft updates, ``tau``), a
+replay buffer, and Gaussian exploration noise of ``exploration_std`` x the torque limit added to
+the actor's action (clipped to the limits). The actor and the critic are 3 x 256 MLPs as in the
+paper; the actor ends in a tanh scaled to the torque limits. The first ``warmup_frames`` are
+collected with uniformly random torques. Each iteration collects ``frames_per_batch`` frames
+from the batched ``TorqueEnv`` and takes ``updates_per_batch`` gradient steps.
+
+It is a ``learn.registry.Learner``: it reports through ``progress(iteration, metrics)``, and its
+checkpoint (networks, targets, optimisers, counters, RNG state; plain tensors, loadable with
+``weights_only=True``) resumes training. The replay buffer is not saved: a resumed run refills
+it (with the current policy) before it learns again.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import torch
+from tensordict.nn import TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.data import Bounded, LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.envs import EnvBase
+from torchrl.modules import MLP, AdditiveGaussianModule, TanhModule, ValueOperator
+from torchrl.objectives import DDPGLoss, SoftUpdate
+
+from inhand_exp.config import DDPGConfig, HandConfig, typed
+from inhand_exp.envs.batched import batched_env
+from inhand_exp.envs.specs import OBS_DIM
+from inhand_exp.envs.torque_env import TorqueEnv
+from inhand_exp.learn.ppo import CheckpointError
+from inhand_exp.learn.registry import Progress
+from inhand_exp.task.goals import GoalPair
+
+KEEP = ("observation", "action", ("next", "observation"), ("next", "reward"),
+        ("next", "done"), ("next", "terminated"), ("next", "success"), ("next", "dropped"))
+
+
+def from_config(cfg) -> DDPG:
+    """The DDPG learner of ``cfg`` (the ``ddpg`` entry of the registry)."""
+    hand = typed(cfg.hand, HandConfig)
+    return DDPG(OBS_DIM, 6, float(hand.max_torque_nm), typed(cfg.learner, DDPGConfig))
+
+
+class DDPG:
+    """Actor, critic, their targets, optimisers and the replay buffer."""
+
+    per_action_log = False  # one action per control period: /eval/episode only
+
+    def __init__(self, obs_dim: int, n_joints: int, max_torque: float, params: DDPGConfig):
+        self.params, self.obs_dim, self.n_joints = params, obs_dim, n_joints
+        self.max_torque = max_torque
+        spec = Bounded(-max_torque, max_torque, shape=(n_joints,), dtype=torch.float32)
+        hidden = list(params.hidden)
+        self.actor = TensorDictSequential(
+            TensorDictModule(MLP(in_features=obs_dim, out_features=n_joints, num_cells=hidden,
+                                 activation_class=nn.ReLU),
+                             in_keys=["observation"], out_keys=["param"]),
+            TanhModule(in_keys=["param"], out_keys=["action"], spec=spec))
+        self.critic = ValueOperator(
+            MLP(in_features=obs_dim + n_joints, out_features=1, num_cells=hidden,
+                activation_class=nn.ReLU),
+            in_keys=["observation", "action"])
+        self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
+        self.loss.make_value_estimator(gamma=params.gamma)
+        self.target = SoftUpdate(self.loss, tau=params.tau)
+        self.explore = TensorDictSequential(self.actor, AdditiveGaussianModule(
+            spec=spec, sigma_init=params.exploration_std * max_torque,
+            sigma_end=params.exploration_std * max_torque, annealing_num_steps=1,
+            std=1.0))
+        self.optim_actor = torch.optim.Adam(self.loss.actor_network_params.values(True, True),
+                                            lr=params.actor_lr)
+        self.optim_critic = torch.optim.Adam(self.loss.value_network_params.values(True, True),
+                                             lr=params.critic_lr)
+        self.buffer = TensorDictReplayBuffer(
+            storage=LazyTensorStorage(params.buffer_size), batch_size=params.batch_size)
+        self.iteration, self.frames = 0, 0
+
+    @property
+    def policy(self) -> TensorDictSequential:
+        return self.actor
+
+    @staticmethod
+    def make_env(cfg, seed: int, goals: list[GoalPair] | None = None,
+                 num_envs: int | None = None, states_hz: float = 0.0,
+                 once: bool = False) -> EnvBase:
+        return batched_env(cfg, seed, goals=goals, num_envs=num_envs, states_hz=states_hz,
+                           once=once, env_class=TorqueEnv)
+
+    def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
+              checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:
+        """Collect ``total_frames`` more frames (whole batches) from ``env``, learning as it
+        goes; random torques until the buffer holds ``warmup_frames``."""
+        p = self.params
+        batches = -(-total_frames // p.frames_per_batch)
+        warm = max(0, p.warmup_frames - self.frames)
+        collector = Collector(env, self.explore, frames_per_batch=p.frames_per_batch,
+                              total_frames=batches * p.frames_per_batch,
+                              init_random_frames=warm, auto_register_policy_transforms=False)
+        try:
+            t = time.perf_counter()
+            for batch in collector:
+                collected = time.perf_counter()
+                self.buffer.extend(batch.reshape(-1).select(*KEEP))
+                metrics = self._update(batch) if len(self.buffer) >= p.batch_size else {}
+                collector.update_policy_weights_()
+                learned = time.perf_counter()
+                self.iteration += 1
+                self.frames += batch.numel()
+                if progress is not None:
+                    progress(self.iteration, {"frames": self.frames, **_rates(batch), **metrics,
+                                              "collect_s": collected - t,
+                                              "learn_s": learned - collected})
+                if checkpoint is not None and self.iteration % checkpoint_every == 0:
+                    self.save(checkpoint)
+                t = time.perf_counter()
+        finally:
+            collector.shutdown()
+        if checkpoint is not None:
+            self.save(checkpoint)
+
+    def _update(self, batch) -> dict[str, float]:
+        sums = torch.zeros(2)
+        n = self.params.updates_per_batch
+        for _ in range(n):
+            sample = self.buffer.sample()
+            out = self.loss(sample)  # the actor's loss sees the critic's parameters detached
+            self.optim_critic.zero_grad()
+            self.optim_actor.zero_grad()
+            (out["loss_value"] + out["loss_actor"]).backward()
+            self.optim_critic.step()
+            self.optim_actor.step()
+            self.target.step()
+            sums += torch.stack([out["loss_actor"].detach(), out["loss_value"].detach()])
+        return {"loss_actor": float(sums[0]) / n, "loss_value": float(sums[1]) / n}
+
+    # --- checkpoints --------------------------------------------------------------------
+
+    def state_dict(self) -> dict:
+        return {"loss": self.loss.state_dict(), "optim_actor": self.optim_actor.state_dict(),
+                "optim_critic": self.optim_critic.state_dict(), "iteration": self.iteration,
+                "frames": self.frames, "obs_dim": self.obs_dim, "n_joints": self.n_joints,
+                "learner": "ddpg", "torch_rng": torch.get_rng_state()}
+
+    def save(self, path: Path) -> None:
+        """Write atomically: a killed save never leaves a half-written checkpoint."""
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        torch.save(self.state_dict(), tmp)
+        tmp.replace(path)
+
+    def load(self, path: Path) -> None:
+        if not path.is_file():
+            raise FileNotFoundError(f"checkpoint {path} not found")
+        state = torch.load(path, weights_only=True)
+        if state.get("learner") != "ddpg":
+            raise CheckpointError(f"checkpoint {path} is not a DDPG checkpoint; this "
+                                  f"configuration has learner=ddpg")
+        if (state["obs_dim"], state["n_joints"]) != (self.obs_dim, self.n_joints):
+            raise CheckpointError(f"checkpoint {path} is for {state['obs_dim']} observations "
+                                  f"and {state['n_joints']} joints")
+        self.loss.load_state_dict(state["loss"])
+        self.optim_actor.load_state_dict(state["optim_actor"])
+        self.optim_critic.load_state_dict(state["optim_critic"])
+        self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
+        torch.set_rng_state(state["torch_rng"])
+
+
+def _rates(batch) -> dict[str, float]:
+    """Return, success and drop rates of the episodes that ended in ``batch``."""
+    done = batch["next", "done"].squeeze(-1)
+    ends = max(int(done.sum()), 1)
+    return {"mean_reward": float(batch["next", "reward"].mean()),
+            "episodes": float(done.sum()),
+            "success_rate": float(batch["next", "success"].squeeze(-1)[done].sum()) / ends,
+            "drop_rate": float(batch["next", "dropped"].squeeze(-1)[done].sum()) / ends}
+

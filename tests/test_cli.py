@@ -97,6 +97,22 @@ def test_multirun_default_layout(tmp_path):
     assert [run_config(p)["config"]["goals"]["name"] for p in logs] == ["easy", "hard"]
 
 
+def bad_goal_files(tmp_path: Path) -> dict[str, Path]:
+    """A header alone, and one good pair moved so that its start, or its goal, is out of reach."""
+    from inhand_exp.config import HandConfig, ObjectConfig
+    from inhand_exp.control.hand import HandModel
+    from inhand_exp.task.goals import goal_set, to_frame
+
+    model = HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
+    good = to_frame(goal_set(model, "easy", 1, seed=5))
+    files = {"empty": good.iloc[:0], "start": good.assign(x0_z=0.9), "goal": good.assign(xg_z=0.9)}
+    paths = {}
+    for name, frame in files.items():
+        paths[name] = tmp_path / f"{name}.csv"
+        frame.to_csv(paths[name], index=False)
+    return paths
+
+
 def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
     first = inhand_exp("mode=train", f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
     assert first.returncode == 0, first.stderr
@@ -105,22 +121,30 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
                      cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert len(read_log(tmp_path / "ev" / "run.mcap").topic("/eval/episode")) == 1
+    (tmp_path / "text.pt").write_text("not a checkpoint\n")
+    goals = bad_goal_files(tmp_path)
+    ev = ["mode=eval", f"checkpoint={policy}"]
     for k, (args, message) in enumerate([
         (["mode=eval"], "mode=eval needs checkpoint=PATH"),
         (["mode=eval", f"checkpoint={tmp_path / 'missing.pt'}"], "not found"),
-        (["mode=eval", f"checkpoint={policy}", "object=cube"], "this configuration has"),
-        (["mode=eval", f"checkpoint={policy}", "learner=ddpg"],
-         "this configuration has learner=ddpg"),
-        (["mode=eval", f"checkpoint={policy}", f"eval.goals_file={tmp_path / 'no.csv'}"],
-         "not found"),
+        (["mode=eval", f"checkpoint={tmp_path / 'text.pt'}"], "not a policy.pt"),
+        ([*ev, "object=cube"], "this configuration has"),
+        ([*ev, "learner=ddpg"], "this configuration has learner=ddpg"),
+        ([*ev, f"eval.goals_file={tmp_path / 'no.csv'}"], "not found"),
+        ([*ev, f"eval.goals_file={goals['empty']}"], "no goal rows"),
+        ([*ev, f"eval.goals_file={goals['start']}"], "line 2: the grasp cannot hold the "
+                                                      "object at X0"),
+        ([*ev, f"eval.goals_file={goals['goal']}"], "line 2: no grasp holds the object at Xg"),
+        (["object=schema"], "object=schema is the typed schema"),
+        (["sim.timestep_s=-1"], "sim.timestep_s must be > 0"),
+        (["no_such_key=1"], "Could not override 'no_such_key'"),
     ]):
         run_dir = tmp_path / f"bad{k}"
         bad = inhand_exp(*args, f"hydra.run.dir={run_dir}", cwd=tmp_path,
                          fast="learner=ddpg" not in args)  # the fast budget is PPO's
         assert bad.returncode == 2 and message in bad.stderr, (args, bad.stderr)
         assert "Traceback" not in bad.stderr
-        if "configuration has" not in message:  # refused before anything was written
-            assert not (run_dir / "run.mcap").exists()
+        assert not run_dir.exists(), args  # a refused run writes nothing
 
 
 def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
@@ -169,6 +193,9 @@ def test_resume_continues_an_interrupted_training_in_its_run_directory(tmp_path)
     (cfg,) = log.topic("/run/config")
     assert cfg["config"]["train"]["frames"] == 24 and cfg["config"]["mode"] == "train"
     assert cfg["config"]["learner"]["frames_per_batch"] == 8  # the run's own overrides
+    done = inhand_exp(f"resume={run_dir}", "train.frames=24", cwd=tmp_path, fast=False)
+    assert done.returncode == 2 and "the training is finished (24 of" in done.stderr
+    assert not (run_dir / "run-3.mcap").exists()  # nothing written for it
 
 
 def test_resume_refuses_what_it_cannot_resume(tmp_path):

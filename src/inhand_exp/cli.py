@@ -16,7 +16,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError, register_configs, validate
-from inhand_exp.learn.ppo import CheckpointError
+from inhand_exp.learn.checkpoint import CheckpointError
 from inhand_exp.task.goals import GoalsError
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
@@ -46,14 +46,15 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
     for what, name in (("checkpoint", cfg.checkpoint), ("goal file", cfg.eval.goals_file)):
         if name and not Path(name).is_file():  # before anything is written
             raise FileNotFoundError(f"{what} {name} not found")
+    from inhand_exp.experiment import prepare, run_job
+
+    job = prepare(cfg, run_dir)  # every input read and checked: a refusal writes nothing
     log_path = fresh_log_path(run_dir, cfg.log.file) if cfg.resume else run_dir / cfg.log.file
     with RunLog(log_path, chunk_size=cfg.log.chunk_size_bytes,
                 flush_every_s=cfg.log.flush_every_s) as log:
         log.write("/run/config", run_config_message(cfg, run_dir, overrides))
         log.flush()
-        from inhand_exp.experiment import run_job
-
-        run_job(cfg, run_dir, log, resume=bool(cfg.resume))
+        run_job(cfg, run_dir, log, job)
     return log_path
 
 
@@ -82,14 +83,51 @@ def resume_argv(argv: list[str]) -> list[str]:
             "hydra.output_subdir=null"]
 
 
+REFUSED = 2  # the exit code of every refused input (bad config value, file, checkpoint)
+_started = False  # the job function was entered: Hydra composed the config
+
+
+def check_choices(choices) -> None:
+    """Refuse ``group=schema``: ``--help`` lists each group's typed schema beside its options,
+    but a schema alone is no option (it would run on its defaults without a word)."""
+    for group, option in choices.items():
+        if isinstance(option, str) and option.startswith("schema") and "/" not in group:
+            raise ConfigError(f"{group}={option} is the typed schema of the group, not an "
+                              f"option; see `inhand-exp --help` for the options of '{group}'")
+
+
+def _discard(run_dir: Path) -> None:
+    """Remove the run directory Hydra made for a refused run, if it holds only Hydra's own
+    files (``.hydra/``, ``*.log``): a refused run leaves nothing behind, and nothing else is
+    ever deleted."""
+    if not run_dir.is_dir():
+        return
+    entries = list(run_dir.iterdir())
+    if all(e.name == ".hydra" or (e.is_file() and e.suffix == ".log") for e in entries):
+        for e in entries:
+            if e.is_dir():
+                for f in e.iterdir():
+                    f.unlink()
+                e.rmdir()
+            else:
+                e.unlink()
+        run_dir.rmdir()
+
+
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def _app(cfg: DictConfig) -> None:
+    global _started
+    _started = True
     hc = HydraConfig.get()
+    run_dir = Path(hc.runtime.output_dir)
     try:
-        log_path = run(cfg, Path(hc.runtime.output_dir), list(hc.overrides.task))
+        check_choices(hc.runtime.choices)
+        log_path = run(cfg, run_dir, list(hc.overrides.task))
     except (ConfigError, CheckpointError, GoalsError, FileNotFoundError) as err:
         print(f"inhand-exp: {err}", file=sys.stderr)
-        raise SystemExit(2) from None
+        if not cfg.get("resume"):
+            _discard(run_dir)
+        raise SystemExit(REFUSED) from None
     print(f"run written to {log_path.parent}  (log: {log_path})")
 
 
@@ -101,5 +139,10 @@ def main() -> None:
         sys.argv[1:] = resume_argv(sys.argv[1:])
     except (ConfigError, FileNotFoundError) as err:
         print(f"inhand-exp: {err}", file=sys.stderr)
-        raise SystemExit(2) from None
-    _app()
+        raise SystemExit(REFUSED) from None
+    try:
+        _app()
+    except SystemExit as end:
+        if end.code == 1 and not _started:  # Hydra refused the command line (its message is out)
+            raise SystemExit(REFUSED) from None
+        raise

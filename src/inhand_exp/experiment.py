@@ -10,12 +10,14 @@ import csv
 import importlib.resources
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from omegaconf import DictConfig
 
+from inhand_exp.config import ConfigError
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
 from inhand_exp.learn.evaluate import evaluate
@@ -33,30 +35,61 @@ def derived_seed(seed: int, *stream: int) -> int:
     return int(np.random.SeedSequence([seed, *stream]).generate_state(1)[0])
 
 
-def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, say: Callable[[str], None] = print,
-            resume: bool = False) -> dict[str, float] | None:
-    """Train and/or evaluate; returns the evaluation summary when there is one.
+@dataclass
+class Job:
+    """What a run will do, checked before anything is written: the learner, loaded from its
+    checkpoint when there is one, its frame budget, and the goal file's pairs when given."""
+
+    mode: str
+    learner: Learner | None = None
+    target: int = 0
+    goals: list[GoalPair] | None = None
+    resumed: bool = False
+
+
+def prepare(cfg: DictConfig, run_dir: Path) -> Job:
+    """Build the learner and read every input (checkpoint, goal file): a bad one is refused
+    here, with a ``ConfigError``, ``CheckpointError``, ``GoalsError`` or ``FileNotFoundError``,
+    before the run writes anything.
 
     ``resume``: continue the training whose checkpoint is in ``run_dir`` up to ``train.frames``
     in all; otherwise a ``checkpoint`` is a starting point for ``train.frames`` more.
     """
     mode = str(getattr(cfg.mode, "value", cfg.mode))
     if mode == "goals":
-        write_goal_set(cfg, run_dir, say)
-        return None
+        return Job(mode)
     learner = make_learner(cfg)
     target = cfg.train.frames
-    if resume:
+    if cfg.resume:
         learner.load(run_dir / CHECKPOINT)
-        say(f"resuming from {run_dir / CHECKPOINT}: iteration {learner.iteration}, "
-            f"{learner.frames} frames")
+        if mode == "train" and learner.frames >= target:
+            raise ConfigError(f"resume={run_dir}: the training is finished ({learner.frames} of "
+                              f"train.frames={target} frames); raise train.frames to go on")
     elif cfg.checkpoint:
         learner.load(Path(cfg.checkpoint))
         target += learner.frames
-    if mode in ("train", "train_eval"):
-        _train(cfg, learner, target, run_dir, log, say)
-    if mode in ("eval", "train_eval"):
-        return _evaluate(cfg, learner, run_dir, log, say)
+    goals = None
+    if mode in ("eval", "train_eval") and cfg.eval.goals_file:
+        goals = test_goals(cfg)
+    return Job(mode, learner, target, goals, resumed=bool(cfg.resume))
+
+
+def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,
+            say: Callable[[str], None] = print) -> dict[str, float] | None:
+    """Train and/or evaluate as ``job`` (``prepare``) says; returns the evaluation summary when
+    there is one."""
+    job = job or prepare(cfg, run_dir)
+    if job.mode == "goals":
+        write_goal_set(cfg, run_dir, say)
+        return None
+    learner = job.learner
+    if job.resumed:
+        say(f"resuming from {run_dir / CHECKPOINT}: iteration {learner.iteration}, "
+            f"{learner.frames} frames")
+    if job.mode in ("train", "train_eval"):
+        _train(cfg, learner, job.target, run_dir, log, say)
+    if job.mode in ("eval", "train_eval"):
+        return _evaluate(cfg, learner, run_dir, log, say, job.goals)
     return None
 
 
@@ -118,8 +151,9 @@ def write_goal_set(cfg, run_dir: Path, say) -> Path:
     return path
 
 
-def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say) -> dict[str, float]:
-    goals = test_goals(cfg)
+def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
+              goals: list[GoalPair] | None = None) -> dict[str, float]:
+    goals = goals if goals is not None else test_goals(cfg)
     save_goals(goals, run_dir / "goals.csv")
     labels = {"object": cfg.object.name, "perturb": cfg.perturb.name, "noise": cfg.noise.name,
               "learner": cfg.learner.name, "seed": int(cfg.seed)}

@@ -9,8 +9,8 @@ from torchrl.envs.utils import ExplorationType, check_env_specs, set_exploration
 from inhand_exp.config import DDPGConfig
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.envs.toy import ToyReachEnv
+from inhand_exp.learn.checkpoint import CheckpointError
 from inhand_exp.learn.ddpg import DDPG
-from inhand_exp.learn.ppo import CheckpointError
 
 SMALL = DDPGConfig(hidden=[64, 64], warmup_frames=400, frames_per_batch=200,
                    updates_per_batch=100, batch_size=64, actor_lr=1e-3, exploration_std=0.3,

@@ -31,7 +31,7 @@ from inhand_exp.config import DDPGConfig, HandConfig, typed
 from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.envs.torque_env import TorqueEnv
-from inhand_exp.learn.ppo import CheckpointError
+from inhand_exp.learn.checkpoint import CheckpointError, read_checkpoint, restore, save_checkpoint
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.goals import GoalPair
 
@@ -146,26 +146,22 @@ class DDPG:
                 "learner": "ddpg", "torch_rng": torch.get_rng_state()}
 
     def save(self, path: Path) -> None:
-        """Write atomically: a killed save never leaves a half-written checkpoint."""
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        torch.save(self.state_dict(), tmp)
-        tmp.replace(path)
+        save_checkpoint(self.state_dict(), path)
 
     def load(self, path: Path) -> None:
-        if not path.is_file():
-            raise FileNotFoundError(f"checkpoint {path} not found")
-        state = torch.load(path, weights_only=True)
-        if state.get("learner") != "ddpg":
-            raise CheckpointError(f"checkpoint {path} is not a DDPG checkpoint; this "
-                                  f"configuration has learner=ddpg")
-        if (state["obs_dim"], state["n_joints"]) != (self.obs_dim, self.n_joints):
-            raise CheckpointError(f"checkpoint {path} is for {state['obs_dim']} observations "
-                                  f"and {state['n_joints']} joints")
-        self.loss.load_state_dict(state["loss"])
-        self.optim_actor.load_state_dict(state["optim_actor"])
-        self.optim_critic.load_state_dict(state["optim_critic"])
+        state = read_checkpoint(path, "ddpg")
+        if (state.get("obs_dim"), state.get("n_joints")) != (self.obs_dim, self.n_joints):
+            raise CheckpointError(f"checkpoint {path} is for {state.get('obs_dim')} "
+                                  f"observations and {state.get('n_joints')} joints")
+
+        def load() -> None:
+            self.loss.load_state_dict(state["loss"])
+            self.optim_actor.load_state_dict(state["optim_actor"])
+            self.optim_critic.load_state_dict(state["optim_critic"])
+            torch.set_rng_state(state["torch_rng"])
+
+        restore(path, load)
         self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
-        torch.set_rng_state(state["torch_rng"])
 
 
 def _rates(batch) -> dict[str, float]:

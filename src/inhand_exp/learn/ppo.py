@@ -25,14 +25,11 @@ from torchrl.objectives.value import GAE
 from inhand_exp.config import PPOConfig, typed
 from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.specs import OBS_DIM
+from inhand_exp.learn.checkpoint import CheckpointError, read_checkpoint, restore, save_checkpoint
 from inhand_exp.learn.features import HandGeometry, ObservationFeatures
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import action_table
 from inhand_exp.task.goals import GoalPair
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that does not fit this configuration."""
 
 
 class FeatureMLP(nn.Module):
@@ -170,31 +167,27 @@ class PPO:
                 "torch_rng": torch.get_rng_state()}
 
     def save(self, path: Path) -> None:
-        """Write atomically: a killed save never leaves a half-written checkpoint."""
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        torch.save(self.state_dict(), tmp)
-        tmp.replace(path)
+        save_checkpoint(self.state_dict(), path)
 
     def load(self, path: Path) -> None:
         """Resume from ``path``; a checkpoint for other observation or action sizes is refused."""
-        if not path.is_file():
-            raise FileNotFoundError(f"checkpoint {path} not found")
-        state = torch.load(path, weights_only=True)
-        if state.get("learner", "ppo") != "ppo":
-            raise CheckpointError(f"checkpoint {path} was trained by learner="
-                                  f"{state['learner']}; this configuration has learner=ppo")
-        if (state["obs_dim"], state["n_actions"]) != (self.obs_dim, self.n_actions):
+        state = read_checkpoint(path, "ppo")
+        if (state.get("obs_dim"), state.get("n_actions")) != (self.obs_dim, self.n_actions):
             raise CheckpointError(
-                f"checkpoint {path} is for {state['obs_dim']} observations and "
-                f"{state['n_actions']} actions; this configuration has {self.obs_dim} and "
+                f"checkpoint {path} is for {state.get('obs_dim')} observations and "
+                f"{state.get('n_actions')} actions; this configuration has {self.obs_dim} and "
                 f"{self.n_actions}")
         saved = bool(state.get("grasp_features", False))
         if saved != self.grasp_features:
             raise CheckpointError(
                 f"checkpoint {path} was trained with learner.grasp_features={saved}; this "
                 f"configuration has learner.grasp_features={self.grasp_features}")
-        self.actor.load_state_dict(state["actor"])
-        self.critic.load_state_dict(state["critic"])
-        self.optim.load_state_dict(state["optim"])
+
+        def load() -> None:
+            self.actor.load_state_dict(state["actor"])
+            self.critic.load_state_dict(state["critic"])
+            self.optim.load_state_dict(state["optim"])
+            torch.set_rng_state(state["torch_rng"])
+
+        restore(path, load)
         self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
-        torch.set_rng_state(state["torch_rng"])

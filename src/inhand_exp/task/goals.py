@@ -33,9 +33,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.sample import Workspace, grasp_of, holds_at, random_grasp
+from inhand_exp.control.repose import strict_hold
+from inhand_exp.control.sample import Workspace, grasp_of, holds_at, postures, random_grasp
 
 GROUPS = ("easy", "medium", "hard")
 SPLITS = ("train", "test")
@@ -169,6 +171,8 @@ def load_goals(path: str | Path, model: HandModel | None = None) -> list[GoalPai
     missing = [c for c in COLUMNS if c not in df.columns]
     if missing:
         raise GoalsError(f"{path}: missing column(s) {', '.join(missing)}")
+    if df.empty:
+        raise GoalsError(f"{path}: no goal rows (a header alone)")
     pairs = []
     faces_by_name = {f.name.lower(): f for f in Face}
     first = 2 if suffix == ".csv" else 1  # a CSV's line 1 is the header
@@ -197,6 +201,32 @@ def load_goals(path: str | Path, model: HandModel | None = None) -> list[GoalPai
                                  f"{r.needs_flip!r}")
         else:
             flip = model is not None and needs_flip(model, posture, xg)
-        pairs.append(GoalPair(r.group, np.array(values[0:3]), xg,
-                              Contacts(posture, tuple(values[6:9])), flip))
+        pair = GoalPair(r.group, np.array(values[0:3]), xg,
+                        Contacts(posture, tuple(values[6:9])), flip)
+        if model is not None:
+            why = unplayable(model, pair)
+            if why is not None:
+                raise GoalsError(f"{path} {where} {row}: {why}")
+        pairs.append(pair)
     return pairs
+
+
+def unplayable(model: HandModel, pair: GoalPair) -> str | None:
+    """Why the hand cannot play ``pair``, by the controllers' model, or None: its grasp does not
+    hold the object at X0 (reach, joint limits, links and palm clear, a squeeze inside the
+    friction cones), or no grasp of any posture holds it at Xg."""
+    x0 = np.round(pair.x0, 4).tolist()
+    try:
+        model.grasp_q(pair.contacts, pair.x0)
+    except GeometryError as err:
+        return f"the grasp cannot hold the object at X0 = {x0}: {err}"
+    if holds_at(model, pair.contacts, pair.x0) is None:
+        return f"the grasp cannot hold the object at X0 = {x0}: a joint is at its limit"
+    if not strict_hold(model, pair.contacts, PrimitivesConfig()):
+        return f"the grasp at X0 = {x0} cannot squeeze the object inside the friction cones"
+    if holds_at(model, pair.contacts, pair.xg) is not None:
+        return None
+    tried = {pair.contacts.posture} if pair.needs_flip else set()
+    if any(grasp_of(model, p, pair.xg) is not None for p in postures(model) if p not in tried):
+        return None
+    return f"no grasp holds the object at Xg = {np.round(pair.xg, 4).tolist()}"

@@ -209,7 +209,11 @@ class SearchConfig(LearnerConfig):
                                  gt=0)
     contact_resolution_m: float = spec(0.05, "Grid resolution of contact positions (m); paper: "
                                        "5 cm.", gt=0)
-    max_nodes: int = spec(2_000_000, "Node budget of one Dijkstra search.", gt=0)
+    max_cells: int = spec(200_000_000, "Largest lattice (postures x contacts x poses) the "
+                          "search builds; a finer one is refused before it exhausts memory.",
+                          gt=0)
+    cache_dir: str = spec("logs/cache", "Where built graphs are kept, one file per setting "
+                          "(keyed by everything that shapes the graph).")
 
 
 @dataclass
@@ -371,7 +375,7 @@ def _check_value(key: str, value: Any, rules: Any) -> None:
 
 def _check_consistency(cfg: DictConfig) -> None:
     """Cross-field rules: matching object and primitives, whole step ratios, joint limits."""
-    if cfg.mode == Mode.eval and not cfg.checkpoint:
+    if cfg.mode == Mode.eval and not cfg.checkpoint and cfg.learner.name != "search":
         raise ConfigError("mode=eval needs checkpoint=PATH (a policy.pt of an earlier run)")
     if "frames_per_batch" in cfg.learner and cfg.learner.frames_per_batch % cfg.train.num_envs:
         raise ConfigError(f"learner.frames_per_batch={cfg.learner.frames_per_batch} must be a "

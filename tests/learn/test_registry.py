@@ -16,6 +16,17 @@ def test_registry_builds_ppo_from_the_config(compose_cfg):
     assert learner.per_action_log and learner.policy is learner.actor
 
 
+def test_registry_builds_every_learner_it_lists(compose_cfg, tmp_path):
+    from inhand_exp.learn.ddpg import DDPG
+    from inhand_exp.learn.search import Search
+
+    kinds = {"ppo": PPO, "ddpg": DDPG, "search": Search}
+    assert set(LEARNERS) == set(kinds)
+    for name, kind in kinds.items():
+        extra = [f"learner.cache_dir={tmp_path}"] if name == "search" else []
+        assert isinstance(make_learner(compose_cfg(f"learner={name}", *extra)), kind)
+
+
 def test_registry_refuses_an_unknown_name_listing_the_known_ones():
     with pytest.raises(ConfigError) as err:
         make_learner(OmegaConf.create({"learner": {"name": "sac"}}))

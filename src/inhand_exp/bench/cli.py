@@ -4,6 +4,7 @@
     inhand-bench primitives [--object pole|cube] [--trials N] [--seed S] [--workers W]
                             [--only hold,repose,...] [overrides...]
     inhand-bench env [--workers W] [--steps N] [--seed S] [overrides...]
+    inhand-bench graph [learner.resolution_m=M learner.resolution_rad=R ...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -171,7 +172,7 @@ def speed(args, cfg: DictConfig) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", choices=("speed", "primitives", "env"))
+    parser.add_argument("what", choices=("speed", "primitives", "env", "graph"))
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
                         help="trials per section (default: the milestone's counts)")
@@ -187,11 +188,16 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_intermixed_args(argv)
     if args.trials is not None and args.trials <= 0:
         parser.error(f"--trials must be > 0, got {args.trials}")
+    learner = ["learner=search"] if args.what == "graph" else []
     try:
-        cfg = load_config(args.object, args.overrides)
+        cfg = load_config(args.object, [*learner, *args.overrides])
     except (ConfigError, ConfigCompositionException) as err:
         sys.exit(f"inhand-bench: config error: {err}".splitlines()[0])
-    if args.what == "env":
+    if args.what == "graph":
+        from inhand_exp.bench.graph import graph_size
+
+        result = graph_size(cfg, seed=args.seed)
+    elif args.what == "env":
         from inhand_exp.bench.throughput import env_throughput
 
         raw, _ = hold_rates(cfg, 2.0, args.seed)

@@ -53,6 +53,7 @@ class Learner(Protocol):
 LEARNERS = {
     "ppo": "inhand_exp.learn.ppo:from_config",
     "ddpg": "inhand_exp.learn.ddpg:from_config",
+    "search": "inhand_exp.learn.search:from_config",
 }
 
 

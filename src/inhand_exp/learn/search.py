@@ -1,0 +1,317 @@
+"""The graph-search baseline (paper section IV-A): Dijkstra over held cells, executed with the
+same primitives in physics, replanned from the observed state.
+
+``train`` builds the graph of ``task.graph`` (or loads it from the on-disk cache, keyed by
+everything that shapes it) and logs its size, build time and memory; no frames are learned. The
+policy acts in the mid-level environment with its 14 actions, so its episodes are run, judged
+and logged exactly as PPO's. At each step it reads its state from the observation alone:
+
+- the object pose ``X_t`` and the goal ``X_g``; the contacts from the joints (the fingertips'
+  place on the object: which side, and where along it);
+- the shortest time to the goal's pose cell from every node (one Dijkstra per goal cell,
+  cached);
+- it carries out the best edge out of its current cell: the mid-level action of that edge
+  (a 2 cm cell is two 1 cm reposes), repeated until the observed cell is the edge's end. An
+  action the feasibility filter rejects, or an edge that does not arrive, is replanned from
+  wherever the object is;
+- at the goal cell, and wherever the graph has no path, it takes the allowed repose that brings
+  the object closest to the goal (the cell is up to half a cell from the goal itself).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from omegaconf import OmegaConf
+from scipy import sparse
+from torchrl.envs import EnvBase
+
+from inhand_exp.config import ConfigError, PrimitivesConfig, SearchConfig, TaskConfig, typed
+from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.sample import Workspace
+from inhand_exp.envs.batched import batched_env
+from inhand_exp.learn.checkpoint import read_checkpoint, save_checkpoint
+from inhand_exp.learn.registry import Progress
+from inhand_exp.task.actions import Action, action_table
+from inhand_exp.task.goals import GoalPair
+from inhand_exp.task.graph import SIDES, Lattice, PoseGraph, build_graph
+from inhand_exp.task.rules import to_go
+
+GRAPH_VERSION = 1  # bump when the graph's definition changes: old caches are not reused
+
+
+def from_config(cfg) -> Search:
+    return Search(cfg)
+
+
+def graph_key(cfg) -> str:
+    """A digest of everything that shapes the graph."""
+    parts = {k: OmegaConf.to_container(cfg[k], resolve=True, enum_to_str=True)
+             for k in ("hand", "object", "primitives")}
+    task = typed(cfg["task"], TaskConfig)
+    parts["workspace"] = [task.workspace_x_m, task.workspace_z_m, task.workspace_theta_rad]
+    s = typed(cfg["learner"], SearchConfig)
+    parts["resolution"] = [s.resolution_m, s.resolution_rad, s.contact_resolution_m]
+    parts["gravity"] = cfg["sim"]["gravity_mps2"]
+    parts["version"] = GRAPH_VERSION
+    blob = json.dumps(parts, sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def save_graph(graph: PoseGraph, path: Path) -> None:
+    lat, m = graph.lattice, graph.matrix
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, xs=lat.xs, zs=lat.zs, ts=lat.ts, cs=lat.cs, ids=graph.ids,
+                        data=m.data, indices=m.indices, indptr=m.indptr,
+                        postures=np.array([[int(f) for f in p.faces] for p in graph.postures]),
+                        build_s=graph.build_s)
+    tmp.replace(path)
+
+
+def load_graph(path: Path) -> PoseGraph:
+    with np.load(path) as z:
+        lat = Lattice(z["xs"], z["zs"], z["ts"], z["cs"])
+        ps = [Posture(tuple(Face(int(f)) for f in row)) for row in z["postures"]]
+        n = int(z["indptr"].size - 1)
+        m = sparse.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=(n, n))
+        return PoseGraph(lat, ps, z["ids"], m, float(z["build_s"]))
+
+
+def check_size(model: HandModel, rules: TaskConfig, s: SearchConfig) -> None:
+    """Refuse a lattice of more than ``learner.max_cells`` candidate cells before building."""
+    lat = Lattice.build(model, Workspace.from_config(rules), s.resolution_m, s.resolution_rad,
+                        s.contact_resolution_m)
+    K, X, Z, T = lat.shape
+    cells = 6 * K**3 * X * Z * T
+    if cells > s.max_cells:
+        raise ConfigError(f"the search lattice has {cells:,} cells (learner.resolution_m="
+                          f"{s.resolution_m}, resolution_rad={s.resolution_rad}, "
+                          f"contact_resolution_m={s.contact_resolution_m}), more than "
+                          f"learner.max_cells={s.max_cells:,}")
+
+
+class Search:
+    """The graph, and a policy that walks it (see the module docstring)."""
+
+    per_action_log = True
+
+    def __init__(self, cfg):
+        self.cfg = cfg
+        self.params = typed(cfg.learner, SearchConfig)
+        self.prim = typed(cfg.primitives, PrimitivesConfig)
+        self.rules = typed(cfg.task, TaskConfig)
+        self.model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
+        self.actions = action_table(self.prim)
+        self.key = graph_key(cfg)
+        self.cache = Path(self.params.cache_dir) / f"graph-{self.key}.npz"
+        self.graph: PoseGraph | None = None
+        self.iteration, self.frames = 0, 0
+        self.stats: dict[str, float] = {}
+
+    # --- the graph --------------------------------------------------------------------------
+
+    def ensure_graph(self) -> PoseGraph:
+        """The graph, loaded from the cache or built (and cached)."""
+        if self.graph is None:
+            if self.cache.is_file():
+                t = time.perf_counter()
+                self.graph = load_graph(self.cache)
+                self.stats["load_s"] = time.perf_counter() - t
+            else:
+                s = self.params
+                check_size(self.model, self.rules, s)
+                self.graph = build_graph(self.model, self.prim,
+                                         Workspace.from_config(self.rules), s.resolution_m,
+                                         s.resolution_rad, s.contact_resolution_m)
+                self.cache.parent.mkdir(parents=True, exist_ok=True)
+                save_graph(self.graph, self.cache)
+            g = self.graph
+            self.stats.update(nodes=g.nodes, edges=g.edges, build_s=g.build_s,
+                              memory_mb=g.bytes / 1e6)
+        return self.graph
+
+    @property
+    def policy(self) -> SearchPolicy:
+        return SearchPolicy(self.ensure_graph(), self.model, self.prim, self.rules,
+                            self.actions)
+
+    @staticmethod
+    def make_env(cfg, seed: int, goals: list[GoalPair] | None = None,
+                 num_envs: int | None = None, states_hz: float = 0.0,
+                 once: bool = False) -> EnvBase:
+        return batched_env(cfg, seed, goals=goals, num_envs=num_envs, states_hz=states_hz,
+                           once=once)
+
+    def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
+              checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:
+        """Build (or load) the graph; nothing is learned from ``env``."""
+        t = time.perf_counter()
+        self.ensure_graph()
+        self.iteration += 1
+        self.frames += total_frames  # the budget is spent: the graph is the whole "training"
+        if progress is not None:
+            progress(self.iteration, {"frames": self.frames, "mean_reward": 0.0,
+                                      "success_rate": 0.0, "drop_rate": 0.0,
+                                      "collect_s": 0.0, "learn_s": time.perf_counter() - t})
+        if checkpoint is not None:
+            self.save(checkpoint)
+
+    def save(self, path: Path) -> None:
+        save_checkpoint({"learner": "search", "iteration": self.iteration,
+                         "frames": self.frames, "graph_key": self.key}, path)
+
+    def load(self, path: Path) -> None:
+        state = read_checkpoint(path, "search")
+        self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
+
+
+@dataclass
+class _Walk:
+    """One environment's episode: its goal, the edge under way and the edges that failed."""
+
+    goal: tuple[float, float, float]
+    edge: tuple | None = None  # (target cell, action index, steps taken, step budget)
+    blocked: set = field(default_factory=set)
+
+
+class SearchPolicy:
+    """Writes ``action`` for a batch of mid-level observations (see the module docstring)."""
+
+    def __init__(self, graph: PoseGraph, model: HandModel, prim: PrimitivesConfig,
+                 rules: TaskConfig, actions: tuple[Action, ...], cached_goals: int = 64):
+        self.graph, self.model, self.prim, self.rules = graph, model, prim, rules
+        self.actions = actions
+        self.walks: dict[int, _Walk] = {}
+        self.fields: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        self.cached_goals = cached_goals
+        lat = graph.lattice
+        steps = {"x": abs(lat.xs[1] - lat.xs[0]) if len(lat.xs) > 1 else 1.0,
+                 "z": abs(lat.zs[1] - lat.zs[0]) if len(lat.zs) > 1 else 1.0,
+                 "t": abs(lat.ts[1] - lat.ts[0]) if len(lat.ts) > 1 else 1.0,
+                 "c": abs(lat.cs[1] - lat.cs[0]) if len(lat.cs) > 1 else 1.0}
+        self.budget = {}  # mid-level actions one edge of each action takes, plus one spare
+        for a in actions:
+            if a.kind == "repose":
+                axis = int(np.argmax(np.abs(a.delta)))
+                self.budget[a.index] = math.ceil(steps["xzt"[axis]] / abs(a.delta[axis])) + 1
+            elif a.kind == "slide":
+                self.budget[a.index] = math.ceil(steps["c"] / abs(a.dc)) + 1
+            else:
+                self.budget[a.index] = 1
+
+    def __call__(self, td):
+        flat = td.reshape(-1)
+        obs = flat["observation"].double().numpy()
+        mask = flat["action_mask"].numpy()
+        out = [self.act(i, obs[i], mask[i]) for i in range(len(obs))]
+        td.set("action", torch.tensor(out, dtype=torch.int64).reshape(td.batch_size))
+        return td
+
+    # --- reading the state ----------------------------------------------------------------------
+
+    def contacts(self, q: np.ndarray, pose: np.ndarray) -> Contacts:
+        """The fingertips' side and place along the pole, from the joints and the pose."""
+        tips_O = (self.model.tips(q) - pose[:2]) @ rotation(pose[2])
+        faces = tuple(Face.RIGHT if t[0] > 0 else Face.LEFT for t in tips_O)
+        return Contacts(Posture(faces), tuple(float(t[1]) for t in tips_O))
+
+    def cell(self, contacts: Contacts, pose: np.ndarray) -> tuple | None:
+        g = self.graph
+        if contacts.posture not in g.postures:
+            return None
+        pc = g.lattice.pose_cell(pose)
+        ks = [g.lattice.contact_cell(c) for c in contacts.coords]
+        if pc is None or any(k is None for k in ks):
+            return None
+        return (g.postures.index(contacts.posture), *ks, *pc)
+
+    def field_for(self, goal: np.ndarray) -> np.ndarray:
+        key = self.graph.lattice.pose_cell(goal)
+        if key not in self.fields:
+            self.fields[key] = self.graph.distances_to(goal)
+            if len(self.fields) > self.cached_goals:
+                self.fields.popitem(last=False)
+        return self.fields[key]
+
+    # --- acting ---------------------------------------------------------------------------------
+
+    def successors(self, cell: tuple, a: Action) -> list[tuple]:
+        """The cells action ``a`` leads to from ``cell`` along one edge."""
+        g, c = self.graph, list(cell)
+        P, K = len(g.postures), len(g.lattice.cs)
+        dims = (P, K, K, K, *g.ids.shape[4:])
+        if a.kind == "repose":
+            axis = int(np.argmax(np.abs(a.delta)))
+            c[4 + axis] += 1 if a.delta[axis] > 0 else -1
+            out = [tuple(c)]
+        elif a.kind == "slide":
+            c[1 + a.finger] += 1 if a.dc > 0 else -1
+            out = [tuple(c)]
+        elif a.kind == "flip":
+            faces = list(g.postures[c[0]].faces)
+            faces[a.finger] = SIDES[1 - SIDES.index(faces[a.finger])]
+            other = Posture(tuple(faces))
+            if other not in g.postures:
+                return []
+            out = []
+            for k in range(K):
+                c2 = list(c)
+                c2[0], c2[1 + a.finger] = g.postures.index(other), k
+                out.append(tuple(c2))
+        else:
+            return []
+        return [t for t in out if all(0 <= v < n for v, n in zip(t, dims, strict=True))]
+
+    def act(self, i: int, obs: np.ndarray, mask: np.ndarray) -> int:
+        q, pose, goal = obs[:6], obs[12:15], obs[15:18]
+        walk = self.walks.get(i)
+        if walk is None or walk.goal != tuple(np.round(goal, 9)):
+            walk = self.walks[i] = _Walk(tuple(np.round(goal, 9)))
+        cell = self.cell(self.contacts(q, pose), pose)
+        if walk.edge is not None:
+            target, a, steps, budget = walk.edge
+            if cell == target:
+                walk.edge = None
+            elif steps < budget and mask[a]:
+                walk.edge = (target, a, steps + 1, budget)
+                return a
+            else:
+                walk.blocked.add((walk.edge[0], a))  # it did not arrive: plan around it
+                walk.edge = None
+        d = self.field_for(goal)
+        ids = self.graph.ids
+        if cell is not None and not (ids[cell] >= 0 and d[ids[cell]] == 0.0):
+            best, choice = math.inf, None
+            for a in self.actions:
+                if not mask[a.index]:
+                    continue
+                for t in self.successors(cell, a):
+                    n = ids[t]
+                    if n < 0 or (t, a.index) in walk.blocked:
+                        continue
+                    value = d[n]
+                    if value < best:
+                        best, choice = value, (t, a.index)
+            if choice is not None and math.isfinite(best):
+                walk.edge = (choice[0], choice[1], 1, self.budget[choice[1]])
+                return choice[1]
+        return self.closest_repose(pose, goal, mask)
+
+    def closest_repose(self, pose: np.ndarray, goal: np.ndarray, mask: np.ndarray) -> int:
+        """The allowed action whose pose change brings the object closest to the goal (a
+        slide or flip, which moves nothing, ranks as staying)."""
+        def after(a: Action) -> float:
+            return to_go(pose + np.asarray(a.delta), goal, self.rules)
+
+        allowed = [a for a in self.actions if mask[a.index]] or list(self.actions)
+        return min(allowed, key=after).index
+

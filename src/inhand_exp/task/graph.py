@@ -1,0 +1,229 @@
+"""The graph of the search baseline (paper section IV-A, after Cruciani et al. 2019).
+
+Nodes are the cells of (posture, three contact coordinates, object pose) that the hand holds:
+object poses on a lattice of ``resolution_m`` in x and z and ``resolution_rad`` in angle over the
+task's workspace, contact coordinates on a lattice of ``contact_resolution_m`` along the pole's
+long faces, and every posture (which face each finger is on). A cell is a node when, by the
+controllers' own model, every finger reaches its contact within its joint limits with its links
+clear of the object and the palm, the object clears the palm, and the three contacts can squeeze
+it inside the friction cones (``sample.face_coords`` per finger, ``repose.strict_hold``).
+
+Edges join neighbouring nodes by one primitive:
+
+- repose: the same contacts, the pose one cell away along x, z or the angle;
+- slide: one finger's coordinate one cell away, the rest unchanged;
+- flip (finger 0, "flip left", and finger 2, "flip right"): that finger to the other face at any
+  coordinate, the pose and the other two contacts unchanged, allowed only when the two staying
+  fingers are on opposite faces (they hold the object alone meanwhile).
+
+An edge weighs the simulated time of the mid-level actions that carry it out (a 2 cm cell is
+two 1 cm reposes of ``primitives.repose_duration_s``). Every check is per finger and per cell,
+so the whole lattice is checked as a few numpy tables; the graph is an undirected sparse matrix
+over the nodes alone.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
+
+from inhand_exp.config import PrimitivesConfig
+from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.repose import strict_hold
+from inhand_exp.control.sample import Workspace, postures
+
+SIDES = (Face.LEFT, Face.RIGHT)
+FLIP_FINGERS = (0, 2)  # the action table's flip left and flip right
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """The cell centres: x, z (m), angle (rad) and contact coordinate (m)."""
+
+    xs: np.ndarray
+    zs: np.ndarray
+    ts: np.ndarray
+    cs: np.ndarray
+
+    @classmethod
+    def build(cls, model: HandModel, workspace: Workspace, resolution_m: float,
+              resolution_rad: float, contact_resolution_m: float) -> Lattice:
+        for name, v in (("resolution_m", resolution_m), ("resolution_rad", resolution_rad),
+                        ("contact_resolution_m", contact_resolution_m)):
+            if not v > 0:
+                raise ValueError(f"{name} must be > 0, got {v}")
+
+        def axis(lo: float, hi: float, step: float) -> np.ndarray:
+            n = int(math.floor((hi - lo) / step + 1e-9))
+            return lo + (hi - lo - n * step) / 2 + step * np.arange(n + 1)  # centred
+
+        (x0, z0, t0), (x1, z1, t1) = workspace.low, workspace.high
+        reach = model.shape.half_z - 2 * model.tip_radius  # a tip stays on the face
+        n = int(reach // contact_resolution_m)
+        return cls(axis(x0, x1, resolution_m), axis(z0, z1, resolution_m),
+                   axis(t0, t1, resolution_rad), contact_resolution_m * np.arange(-n, n + 1))
+
+    @property
+    def shape(self) -> tuple[int, int, int, int]:
+        return len(self.cs), len(self.xs), len(self.zs), len(self.ts)
+
+    def pose_cell(self, pose: np.ndarray) -> tuple[int, int, int] | None:
+        """The nearest pose cell, or None outside the lattice by more than half a cell."""
+        out = []
+        for axis, v in zip((self.xs, self.zs, self.ts), pose, strict=True):
+            i = int(np.argmin(np.abs(axis - v)))
+            step = axis[1] - axis[0] if len(axis) > 1 else np.inf
+            if abs(axis[i] - v) > step / 2 + 1e-9:
+                return None
+            out.append(i)
+        return tuple(out)
+
+    def contact_cell(self, c: float) -> int | None:
+        i = int(np.argmin(np.abs(self.cs - c)))
+        step = self.cs[1] - self.cs[0] if len(self.cs) > 1 else np.inf
+        return i if abs(self.cs[i] - c) <= step / 2 + 1e-9 else None
+
+
+def finger_table(model: HandModel, lattice: Lattice, margin: float = 0.1) -> np.ndarray:
+    """``F[i, s, k, x, z, t]``: finger ``i`` alone touches side ``SIDES[s]`` at coordinate
+    ``cs[k]`` with the object at that pose (reach, joint limits with ``margin``, links clear)."""
+    K, X, Z, T = lattice.shape
+    F = np.zeros((3, 2, K, X, Z, T), dtype=bool)
+    r = model.tip_radius
+    for (ix, x), (iz, z), (it, t) in itertools.product(
+            enumerate(lattice.xs), enumerate(lattice.zs), enumerate(lattice.ts)):
+        pose = np.array([x, z, t])
+        R = rotation(t)
+        for s, face in enumerate(SIDES):
+            for k, c in enumerate(lattice.cs):
+                point, inward = model.shape.local_contact(face, float(c))
+                target = pose[:2] + R @ (point - r * inward)
+                for i, f in enumerate(model.fingers):
+                    for elbow in (1, -1):
+                        qi = f.ik(target, elbow)
+                        if (qi is not None and f.within_limits(qi, margin)
+                                and model.finger_gap(i, qi, pose) >= model.clearance):
+                            F[i, s, k, ix, iz, it] = True
+                            break
+    return F
+
+
+@dataclass
+class PoseGraph:
+    """The nodes (cells the hand holds) and the weighted, undirected edges between them."""
+
+    lattice: Lattice
+    postures: list[Posture]
+    ids: np.ndarray  # (P, K, K, K, X, Z, T) node id, -1 where the hand does not hold
+    matrix: sparse.csr_matrix  # (n, n) edge weights (s)
+    build_s: float = 0.0
+
+    @property
+    def nodes(self) -> int:
+        return self.matrix.shape[0]
+
+    @property
+    def edges(self) -> int:
+        return self.matrix.nnz // 2
+
+    @property
+    def bytes(self) -> int:
+        m = self.matrix
+        return self.ids.nbytes + m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
+
+    def node(self, contacts: Contacts, pose: np.ndarray) -> int:
+        """The node of the cell nearest to ``contacts`` at ``pose``, or -1."""
+        if contacts.posture not in self.postures:
+            return -1
+        cell = self.lattice.pose_cell(pose)
+        ks = [self.lattice.contact_cell(c) for c in contacts.coords]
+        if cell is None or any(k is None for k in ks):
+            return -1
+        return int(self.ids[(self.postures.index(contacts.posture), *ks, *cell)])
+
+    def distances_to(self, goal: np.ndarray) -> np.ndarray:
+        """Shortest time (s) from every node to any node at the goal's pose cell (inf where
+        none is reachable; all inf when the goal cell holds no node)."""
+        cell = self.lattice.pose_cell(goal)
+        if cell is None:
+            return np.full(self.nodes, np.inf)
+        targets = self.ids[(..., *cell)]
+        targets = targets[targets >= 0]
+        if targets.size == 0:
+            return np.full(self.nodes, np.inf)
+        return csgraph.dijkstra(self.matrix, directed=False, indices=targets, min_only=True)
+
+
+def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
+                resolution_m: float, resolution_rad: float, contact_resolution_m: float
+                ) -> PoseGraph:
+    """The graph at these resolutions (see the module docstring)."""
+    import time
+
+    start = time.perf_counter()
+    lat = Lattice.build(model, workspace, resolution_m, resolution_rad, contact_resolution_m)
+    K, X, Z, T = lat.shape
+    ps = postures(model)
+    F = finger_table(model, lat)
+    palm = np.zeros((X, Z, T), dtype=bool)
+    for ix, iz, it in itertools.product(range(X), range(Z), range(T)):
+        palm[ix, iz, it] = model.palm_gap(np.array([lat.xs[ix], lat.zs[iz], lat.ts[it]])) \
+            >= model.clearance
+    valid = np.zeros((len(ps), K, K, K, X, Z, T), dtype=bool)
+    for p, posture in enumerate(ps):
+        s = [SIDES.index(f) for f in posture.faces]
+        squeeze = np.zeros((K, K, K), dtype=bool)
+        for k in itertools.product(range(K), repeat=3):
+            squeeze[k] = strict_hold(model, Contacts(posture, tuple(float(lat.cs[j])
+                                                                    for j in k)), prim)
+        valid[p] = (squeeze[:, :, :, None, None, None]
+                    & F[0, s[0]][:, None, None] & F[1, s[1]][None, :, None]
+                    & F[2, s[2]][None, None, :] & palm)
+    ids = np.full(valid.shape, -1, dtype=np.int32)
+    ids[valid] = np.arange(int(valid.sum()))
+    rows, cols, weights = [], [], []
+
+    def link(a: np.ndarray, b: np.ndarray, w: float) -> None:
+        ok = (a >= 0) & (b >= 0)
+        rows.append(a[ok])
+        cols.append(b[ok])
+        weights.append(np.full(int(ok.sum()), w))
+
+    repose = [math.ceil(resolution_m / prim.repose_dx_m - 1e-9),
+              math.ceil(resolution_m / prim.repose_dz_m - 1e-9),
+              math.ceil(resolution_rad / prim.repose_dtheta_rad - 1e-9)]
+    for axis, n in zip((4, 5, 6), repose, strict=True):  # x, z, angle
+        a = np.moveaxis(ids, axis, 0)
+        link(a[:-1], a[1:], n * prim.repose_duration_s)
+    if prim.slide:
+        n = math.ceil(contact_resolution_m / prim.slide_dc_m - 1e-9)
+        for axis in (1, 2, 3):
+            a = np.moveaxis(ids, axis, 0)
+            link(a[:-1], a[1:], n * prim.slide_duration_s)
+    if prim.flip:
+        for p, posture in enumerate(ps):
+            for f in FLIP_FINGERS:
+                stay = [j for j in range(3) if j != f]
+                if posture.faces[stay[0]] == posture.faces[stay[1]]:
+                    continue  # the staying pair must oppose each other
+                other = Posture(tuple(SIDES[1 - SIDES.index(face)] if j == f else face
+                                      for j, face in enumerate(posture.faces)))
+                if other not in ps:
+                    continue
+                q = ps.index(other)
+                src = np.moveaxis(ids[p], f, 0)  # (K_f, ..., X, Z, T)
+                dst = np.moveaxis(ids[q], f, 0)
+                for k, k2 in itertools.product(range(K), repeat=2):
+                    if p < q:  # undirected: each pair of postures once
+                        link(src[k], dst[k2], prim.flip_duration_s)
+    n = int(valid.sum())
+    r, c, w = (np.concatenate(v) if v else np.zeros(0) for v in (rows, cols, weights))
+    matrix = sparse.coo_matrix((w, (r, c)), shape=(n, n)).tocsr()
+    matrix = matrix.maximum(matrix.T).tocsr()  # symmetric: both directions
+    return PoseGraph(lat, ps, ids, matrix, time.perf_counter() - start)

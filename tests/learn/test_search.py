@@ -1,0 +1,156 @@
+"""The graph-search baseline: Dijkstra's distances, the graph's edges executed in physics, the
+on-disk cache and clean refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from scipy import sparse
+
+from inhand_exp.config import ConfigError, HandConfig, ObjectConfig
+from inhand_exp.control.grasp import Contacts
+from inhand_exp.control.hand import HandModel
+from inhand_exp.control.sample import Workspace
+from inhand_exp.envs.primitive_env import PrimitiveEnv
+from inhand_exp.learn.search import Search
+from inhand_exp.task.goals import GoalPair
+from inhand_exp.task.graph import Lattice, PoseGraph
+
+TINY = ("learner=search", "task.workspace_x_m=[-0.02,0.02]", "task.workspace_z_m=[0.32,0.36]",
+        "task.workspace_theta_rad=[-0.2,0.2]")
+
+
+def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
+    """A hand-built graph over 5 nodes: 0-1 (1 s), 1-2 (1 s), 0-2 (5 s), 2-3 (2 s); 4 alone."""
+    lat = Lattice(np.array([0.0]), np.array([0.3]), np.array([0.0, 0.1, 0.2, 0.3, 0.4]),
+                  np.array([0.0]))
+    ids = np.arange(5, dtype=np.int32).reshape(1, 1, 1, 1, 1, 1, 5)
+    r, c, w = [0, 1, 0, 2], [1, 2, 2, 3], [1.0, 1.0, 5.0, 2.0]
+    m = sparse.coo_matrix((w, (r, c)), shape=(5, 5)).tocsr()
+    g = PoseGraph(lat, [None], ids, m.maximum(m.T).tocsr())
+    d = g.distances_to(np.array([0.0, 0.3, 0.3]))  # the goal cell is node 3
+    np.testing.assert_allclose(d, [4.0, 3.0, 2.0, 0.0, np.inf])
+    assert g.edges == 4 and g.nodes == 5
+    assert np.isinf(g.distances_to(np.array([0.0, 0.3, 2.0]))).all()  # outside the lattice
+
+
+def test_resolutions_must_be_positive():
+    model = HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
+    for bad in ((0.0, 0.2, 0.05), (0.02, -0.2, 0.05), (0.02, 0.2, 0.0)):
+        with pytest.raises(ValueError, match="must be > 0"):
+            Lattice.build(model, Workspace(), *bad)
+
+
+def test_config_refuses_bad_resolutions_and_oversized_lattices(compose_cfg, tmp_path):
+    from inhand_exp.config import validate
+
+    with pytest.raises(ConfigError, match="learner.resolution_m must be > 0"):
+        validate(compose_cfg("learner=search", "learner.resolution_m=0"))
+    cfg = compose_cfg("learner=search", "learner.max_cells=1000",
+                      f"learner.cache_dir={tmp_path}")
+    with pytest.raises(ConfigError, match="more than learner.max_cells=1,000"):
+        Search(cfg).ensure_graph()
+
+
+def path_edges(search: Search, start: int, goal: np.ndarray, most: int = 4):
+    """The first edges (start cell, end cell, action) of the shortest path from ``start``."""
+    g, policy = search.graph, search.policy
+    d = g.distances_to(goal)
+    cells = {int(n): tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0}
+    out, n = [], start
+    while d[n] > 0 and len(out) < most:
+        row = g.matrix.getrow(n)
+        m = int(row.indices[np.argmin(row.data + d[row.indices])])
+        a, b = cells[n], cells[m]
+        action = next(x for x in search.actions
+                      if x.kind != "flip" and b in policy.successors(a, x))
+        out.append((a, b, action))
+        n = m
+    return out
+
+
+def test_every_edge_of_a_plan_executes_with_the_controllers(compose_cfg, tmp_path):
+    cfg = compose_cfg(*TINY, f"learner.cache_dir={tmp_path}", "learner.resolution_m=0.02",
+                      "learner.resolution_rad=0.2", "primitives.flip=false")
+    search = Search(cfg)
+    g = search.ensure_graph()
+    assert g.nodes > 50 and g.edges > g.nodes
+    lat = g.lattice
+    goal = np.array([lat.xs[-1], lat.zs[-1], lat.ts[-1]])
+    d = g.distances_to(goal)
+    far = [n for n in np.flatnonzero(np.isfinite(d)) if d[n] >= 3.0]
+    assert far, "no node three steps from the goal corner"
+    edges = path_edges(search, int(far[0]), goal)
+    assert len(edges) >= 3
+    policy = search.policy
+    for a, b, action in edges:
+        p, k, cell = a[0], a[1:4], a[4:]
+        pose = np.array([lat.xs[cell[0]], lat.zs[cell[1]], lat.ts[cell[2]]])
+        contacts = Contacts(g.postures[p], tuple(float(lat.cs[j]) for j in k))
+        env = PrimitiveEnv(cfg, goals=[GoalPair("easy", pose, goal, contacts)], seed=0)
+        td = env.reset()
+        arrived = False
+        for _ in range(policy.budget[action.index]):
+            assert td["action_mask"][action.index], (a, action.name)
+            td = env.step(td.set("action", torch.tensor(action.index)))["next"]
+            assert not td["dropped"].item()
+            obs = td["observation"].double().numpy()
+            if policy.cell(policy.contacts(obs[:6], obs[12:15]), obs[12:15]) == b:
+                arrived = True
+                break
+        env.close()
+        assert arrived, (a, b, action.name)
+
+
+def test_the_graph_is_cached_by_what_shapes_it(compose_cfg, tmp_path):
+    a = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    g = a.ensure_graph()
+    assert a.cache.is_file() and "load_s" not in a.stats
+    b = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    h = b.ensure_graph()
+    assert "load_s" in b.stats and (h.matrix != g.matrix).nnz == 0
+    assert np.array_equal(h.ids, g.ids) and h.postures == g.postures
+    other = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}", "object.width_m=0.03"))
+    assert other.cache != a.cache
+    assert Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}",
+                              "learner.resolution_rad=0.1")).cache != a.cache
+
+
+def test_search_plays_easy_pairs_to_the_goal(compose_cfg, tmp_path):
+    from inhand_exp.control.hand import HandModel as HM
+    from inhand_exp.learn.evaluate import evaluate
+    from inhand_exp.task.goals import goal_set
+
+    cfg = compose_cfg("learner=search", f"learner.cache_dir={tmp_path}", "goals=easy",
+                      "train.num_envs=2", "train.backend=serial")
+    search = Search(cfg)
+    model = HM.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
+    goals = goal_set(model, "easy", 4, seed=1234)
+    env = search.make_env(cfg, 0, goals=goals, num_envs=2, once=True)
+    try:
+        summary = evaluate(env, search.policy, goals)
+    finally:
+        env.close()
+    assert summary["success_rate"] >= 0.75, summary
+
+
+def test_flip_edges_move_finger_0_or_2_over_an_opposed_pair(compose_cfg, tmp_path):
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    g = search.ensure_graph()
+    cells = {int(n): tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0}
+    coo = g.matrix.tocoo()
+    flips = 0
+    for n, m in zip(coo.row, coo.col, strict=True):
+        a, b = cells[int(n)], cells[int(m)]
+        if a[0] == b[0]:
+            assert sum(x != y for x, y in zip(a, b, strict=True)) == 1  # one step of one axis
+            continue
+        flips += 1
+        assert a[4:] == b[4:]  # the pose does not change
+        fa, fb = g.postures[a[0]].faces, g.postures[b[0]].faces
+        (f,) = [i for i in range(3) if fa[i] != fb[i]]
+        assert f in (0, 2)
+        stay = [i for i in range(3) if i != f]
+        assert fa[stay[0]] != fa[stay[1]] and a[1 + stay[0]] == b[1 + stay[0]]
+    assert flips > 0

@@ -79,11 +79,17 @@ def test_existing_log_is_never_overwritten(tmp_path):
     assert (run_dir / "run.mcap").read_bytes() == before
 
 
-@pytest.mark.parametrize("launcher", [[], ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]],
-                         ids=["basic", "joblib"])
+JOBLIB = ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
+
+
+@pytest.mark.parametrize("launcher", [[], JOBLIB, [*JOBLIB, "train.backend=parallel"]],
+                         ids=["basic", "joblib", "joblib-worker-processes"])
 def test_two_job_multirun_leaves_two_readable_logs(tmp_path, launcher):
+    """Under joblib, jobs whose environments run in worker processes work too (joblib's
+    'loky' start method must not reach the spawned workers)."""
     sweep = tmp_path / "sweep"
-    res = inhand_exp("-m", "seed=0,1", *launcher, f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    args = ["-m", "seed=0,1", f"hydra.sweep.dir={sweep}", *FAST, *launcher]
+    res = inhand_exp(*args, cwd=tmp_path, fast=False)
     assert res.returncode == 0, res.stderr
     seeds = sorted(run_config(sweep / job / "run.mcap")["seed"] for job in ("0", "1"))
     assert seeds == [0, 1]

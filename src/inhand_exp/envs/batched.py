@@ -11,6 +11,7 @@ sub-environments get the seeds TorchRL derives from it, in row-major order.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import time
 import warnings
@@ -90,6 +91,18 @@ def split_goals(goals: list[GoalPair], n: int) -> list[list[GoalPair]]:
     return [goals[i::n] for i in range(n)]
 
 
+def plain_start_method() -> None:
+    """Make this process's default start method a standard one before spawning workers.
+
+    Inside a job of Hydra's joblib launcher the default is joblib's own ``loky``, and a spawned
+    child copies the parent's default as it starts: it cannot find ``loky`` and dies ("cannot
+    find context for 'loky'"). The workers are spawned explicitly anyway.
+    """
+    if multiprocessing.get_start_method(allow_none=True) not in (None, "spawn", "fork",
+                                                                  "forkserver"):
+        multiprocessing.set_start_method("spawn", force=True)
+
+
 def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
                 num_envs: int | None = None, states_hz: float = 0.0,
                 once: bool = False, env_class: type[EnvBase] = PrimitiveEnv) -> EnvBase:
@@ -112,6 +125,7 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
     if backend == "serial":
         env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)
     else:
+        plain_start_method()
         env = SleepyParallelEnv(workers, _make_row, create_env_kwargs=kwargs,
                                 mp_start_method="spawn")
     env.set_seed(seed)

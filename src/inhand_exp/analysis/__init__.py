@@ -1,0 +1,1 @@
+"""Offline analysis of run logs: tidy pandas frames, the paper's tables, plots."""

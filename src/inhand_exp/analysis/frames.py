@@ -1,0 +1,115 @@
+"""Run logs to tidy pandas DataFrames: one row per run, per training iteration, per episode.
+
+Every ``*.mcap`` below the given paths is read with ``record.read_log``, complete or truncated
+(a killed run keeps its completed chunks). A file that is not a run log of this project (not
+MCAP, or no ``/run/config``) is skipped with a warning naming it; nothing else stops the
+reading.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from inhand_exp.record.reader import LogError, read_log
+
+LABELS = ("learner", "variant", "object", "perturb", "noise", "seed")
+# overrides that do not change what a policy is (what a run does, where it writes, how long)
+NOT_RECIPE = {"seed", "mode", "checkpoint", "goals", "resume", "learner", "object", "perturb",
+              "noise", "train.frames", "train.workers", "train.backend", "train.num_envs"}
+NOT_RECIPE_PREFIXES = ("hydra", "+hydra", "log.", "eval.")
+
+
+def variant(overrides: Iterable[str]) -> str:
+    """The recipe of a run, from its overrides: every override that changes the policy (the
+    reward, the observation, the training goals...), sorted; "default" when there is none."""
+    keep = []
+    for o in overrides:
+        key = o.split("=", 1)[0].lstrip("+~")
+        if key in NOT_RECIPE or key.startswith(NOT_RECIPE_PREFIXES):
+            continue
+        keep.append(o)
+    return " ".join(sorted(keep)) or "default"
+
+
+def _policy_overrides(cfg: dict) -> list[str]:
+    """The overrides of the run that trained the evaluated policy: its ``.hydra`` record beside
+    the checkpoint when there is one, else this run's own."""
+    ckpt = cfg.get("config", {}).get("checkpoint")
+    if ckpt:
+        saved = Path(ckpt).parent / ".hydra" / "overrides.yaml"
+        if saved.is_file():
+            import yaml
+
+            loaded = yaml.safe_load(saved.read_text())
+            if isinstance(loaded, list):
+                return [str(o) for o in loaded]
+    return list(cfg.get("overrides", []))
+
+
+@dataclass
+class Frames:
+    runs: pd.DataFrame
+    iterations: pd.DataFrame
+    episodes: pd.DataFrame
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+
+def find_logs(paths: Iterable[str | Path]) -> list[Path]:
+    """Every ``.mcap`` file given, or below a given directory, in a stable order."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            out += sorted(p.rglob("*.mcap"))
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise FileNotFoundError(f"{p}: no such file or directory")
+    return out
+
+
+def _run_row(path: Path, cfg: dict, truncated: bool, corrupt: int) -> dict:
+    c = cfg.get("config", {})
+    return {"log": str(path), "run_dir": str(path.parent),
+            "learner": c.get("learner", {}).get("name"), "object": c.get("object", {}).get("name"),
+            "perturb": c.get("perturb", {}).get("name"), "noise": c.get("noise", {}).get("name"),
+            "seed": cfg.get("seed"), "mode": cfg.get("mode"),
+            "variant": variant(_policy_overrides(cfg)),
+            "goals": c.get("goals", {}).get("name"),
+            "train_frames": c.get("train", {}).get("frames"),
+            "checkpoint": c.get("checkpoint"), "truncated": truncated,
+            "corrupt_chunks": corrupt}
+
+
+def load(paths: Iterable[str | Path], warn: Callable[[str], None] = print) -> Frames:
+    """The frames of every run log below ``paths``."""
+    runs, iterations, episodes, skipped = [], [], [], []
+    for path in find_logs(paths):
+        try:
+            log = read_log(path)
+        except (LogError, OSError) as err:
+            skipped.append((str(path), str(err)))
+            warn(f"inhand-analyze: skipping {path}: not a run log ({err})")
+            continue
+        configs = log.topic("/run/config")
+        if not configs:
+            why = "no /run/config message"
+            skipped.append((str(path), why))
+            warn(f"inhand-analyze: skipping {path}: {why}")
+            continue
+        run = _run_row(path, configs[0], log.truncated, log.corrupt_chunks)
+        if log.truncated or log.corrupt_chunks:
+            warn(f"inhand-analyze: {path}: read "
+                 f"{'a truncated log' if log.truncated else 'a damaged log'}"
+                 f" ({log.corrupt_chunks} damaged chunks left out)")
+        runs.append(run)
+        ids = {k: run[k] for k in ("log", *LABELS)}
+        for m in log.topic("/train/iteration"):
+            flat = {k: v for k, v in m.items() if k != "losses"}
+            iterations.append({**ids, **flat, **m.get("losses", {})})
+        for m in log.topic("/eval/episode"):
+            episodes.append({**m, "log": run["log"], "variant": run["variant"]})
+    return Frames(pd.DataFrame(runs), pd.DataFrame(iterations), pd.DataFrame(episodes), skipped)

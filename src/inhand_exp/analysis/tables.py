@@ -1,0 +1,115 @@
+"""The paper's tables from the episode frame: rates per seed, then mean and spread over seeds,
+beside the paper's published figures (``paper_results.csv``)."""
+
+from __future__ import annotations
+
+import importlib.resources
+import io
+
+import numpy as np
+import pandas as pd
+
+TABLES = ("comparison", "robustness", "cube")
+METRICS = ("success_rate", "drop_rate", "timeout_rate", "avg_time_s")
+NEEDS_FLIP = "hard, needs flip"
+
+
+def paper_results() -> pd.DataFrame:
+    text = importlib.resources.files("inhand_exp").joinpath("paper_results.csv").read_text()
+    return pd.read_csv(io.StringIO(text))
+
+
+def per_seed(episodes: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
+    """Success, drop and timeout rates and the mean time of the successes, per ``keys`` + seed."""
+    def rates(g: pd.DataFrame) -> pd.Series:
+        wins = g[g["success"]]
+        return pd.Series({"episodes": len(g), "success_rate": g["success"].mean(),
+                          "drop_rate": g["dropped"].mean(), "timeout_rate": g["timeout"].mean(),
+                          "avg_time_s": wins["sim_time_s"].mean() if len(wins) else np.nan})
+
+    return episodes.groupby([*keys, "seed"], dropna=False).apply(
+        rates, include_groups=False).reset_index()
+
+
+def over_seeds(seeds: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
+    """Mean and standard deviation (over seeds, ddof 1; NaN for one seed) of every metric."""
+    agg = {f"{m}_{s}": (m, s) for m in METRICS for s in ("mean", "std")}
+    out = seeds.groupby(keys, dropna=False).agg(seeds=("seed", "nunique"),
+                                                episodes=("episodes", "sum"), **agg)
+    return out.reset_index()
+
+
+def _with_flip_row(episodes: pd.DataFrame) -> pd.DataFrame:
+    flips = episodes[(episodes["group"] == "hard") & episodes.get("needs_flip", False)]
+    return pd.concat([episodes, flips.assign(group=NEEDS_FLIP)], ignore_index=True)
+
+
+def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
+    """The rows of ``table`` (comparison, robustness, cube) with the paper's figures beside."""
+    if table not in TABLES:
+        raise ValueError(f"table must be one of {TABLES}, got {table!r}")
+    if episodes.empty:
+        return pd.DataFrame()
+    paper = paper_results()
+    if table == "comparison":
+        eps = _with_flip_row(episodes[(episodes["object"] == "pole")
+                                      & (episodes["perturb"] == "none")
+                                      & (episodes["noise"] == "none")])
+        keys = ["learner", "variant", "group"]
+        ref = paper[paper["study"] == "comparison"].rename(columns={"method": "learner"})
+    elif table == "robustness":
+        eps = episodes[(episodes["object"] == "pole") & (episodes["group"] == "medium")]
+        keys = ["learner", "variant", "perturb", "noise"]
+        ref = paper[paper["study"] == "robustness"].rename(columns={"method": "learner"})
+    else:
+        eps = episodes[episodes["object"] == "cube"]
+        keys = ["learner", "variant", "object"]
+        ref = paper[paper["study"] == "cube"].rename(columns={"method": "learner"})
+    if eps.empty:
+        return pd.DataFrame()
+    out = over_seeds(per_seed(eps, keys), keys)
+    ref = ref[[*(k for k in keys if k != "variant"), "success_rate", "drop_rate",
+               "avg_time_s"]].rename(
+        columns={"success_rate": "paper_success", "drop_rate": "paper_drop",
+                 "avg_time_s": "paper_time_s"})
+    return out.merge(ref, on=[k for k in keys if k != "variant"], how="left")
+
+
+def _cell(mean: float, std: float, pct: bool) -> str:
+    if pd.isna(mean):
+        return "-"
+    scale, unit, digits = (100, " %", 1) if pct else (1, "", 2)
+    text = f"{mean * scale:.{digits}f}"
+    if not pd.isna(std):
+        text += f" ± {std * scale:.{digits}f}"
+    return text + unit
+
+
+def _ref(v: float, pct: bool) -> str:
+    return "-" if pd.isna(v) else (f"{v * 100:.1f} %" if pct else f"{v:.2f}")
+
+
+def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
+    """``rows`` (from ``build``) as a markdown table, or CSV."""
+    if rows.empty:
+        return f"(no episodes for the {table} table)"
+    if fmt == "csv":
+        return rows.to_csv(index=False)
+    if fmt != "markdown":
+        raise ValueError(f"format must be markdown or csv, got {fmt!r}")
+    keys = [c for c in ("learner", "variant", "group", "perturb", "noise", "object")
+            if c in rows.columns and (c != "variant" or rows[c].nunique() > 1)]
+    head = [*keys, "seeds", "episodes", "success", "paper", "drops", "paper", "timeouts",
+            "avg time (s)", "paper"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for _, r in rows.iterrows():
+        cells = [str(r[k]) for k in keys] + [
+            str(int(r["seeds"])), str(int(r["episodes"])),
+            _cell(r["success_rate_mean"], r["success_rate_std"], True),
+            _ref(r.get("paper_success"), True),
+            _cell(r["drop_rate_mean"], r["drop_rate_std"], True), _ref(r.get("paper_drop"), True),
+            _cell(r["timeout_rate_mean"], r["timeout_rate_std"], True),
+            _cell(r["avg_time_s_mean"], r["avg_time_s_std"], False),
+            _ref(r.get("paper_time_s"), False)]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)

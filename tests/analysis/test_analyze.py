@@ -1,0 +1,113 @@
+"""inhand-analyze: logs below a path become frames, the paper's tables (mean and std over seeds)
+and plots; foreign, corrupt and truncated files are handled."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from inhand_exp.analysis import tables
+from inhand_exp.analysis.cli import main
+from inhand_exp.analysis.frames import load, variant
+from inhand_exp.record import RunLog
+from inhand_exp.runinfo import run_config_message
+
+
+def episode(k: int, group: str, success: bool, seed: int, dropped: bool = False) -> dict:
+    return {"episode": k, "group": group, "success": success, "dropped": dropped,
+            "timeout": not (success or dropped), "sim_time_s": 2.0 + k, "n_actions": 3,
+            "n_invalid": 0, "x0": [0.0, 0.3, 0.0], "xg": [0.01, 0.3, 0.1],
+            "final_pose": [0.0, 0.3, 0.0], "final_err_m": 0.0, "final_err_rad": 0.0,
+            "needs_flip": group == "hard" and k % 2 == 0, "object": "pole", "perturb": "none",
+            "noise": "none", "learner": "ppo", "seed": seed}
+
+
+def write_run(compose_cfg, run_dir: Path, seed: int, wins: dict[str, int], n: int = 10,
+              overrides: tuple[str, ...] = ()) -> Path:
+    run_dir.mkdir(parents=True)
+    cfg = compose_cfg(f"seed={seed}", *overrides)
+    path = run_dir / "run.mcap"
+    with RunLog(path) as log:
+        log.write("/run/config", run_config_message(cfg, run_dir, [f"seed={seed}",
+                                                                   *overrides]))
+        for it in range(1, 4):
+            log.write("/train/iteration", {
+                "iteration": it, "frames": 1024 * it, "wall_s": 10.0 * it,
+                "losses": {"loss_objective": 0.1}, "mean_return": 0.0,
+                "success_rate": 0.2 * it + 0.1 * seed, "drop_rate": 0.0,
+                "actions_per_s": 50.0, "collect_s": 9.0, "learn_s": 1.0})
+        for group, w in wins.items():
+            for k in range(n):
+                log.write("/eval/episode", episode(k, group, k < w, seed, dropped=k == n - 1))
+    return path
+
+
+@pytest.fixture
+def sweep(tmp_path, compose_cfg) -> Path:
+    root = tmp_path / "sweep"
+    write_run(compose_cfg, root / "0", 0, {"easy": 8, "hard": 4})
+    write_run(compose_cfg, root / "1", 1, {"easy": 6, "hard": 2})
+    write_run(compose_cfg, root / "2", 0, {"easy": 3}, overrides=("task.reward_progress=0.1",))
+    (root / "junk.mcap").write_text("not an mcap file\n")
+    with RunLog(root / "empty.mcap"):
+        pass  # a valid MCAP with no /run/config
+    good = (root / "1" / "run.mcap").read_bytes()
+    (root / "killed").mkdir()
+    (root / "killed" / "run.mcap").write_bytes(good[:len(good) * 2 // 3])  # writer killed
+    return root
+
+
+def test_frames_tables_and_skipped_files(sweep):
+    warnings: list[str] = []
+    frames = load([sweep], warn=warnings.append)
+    assert sorted(Path(p).name for p, _ in frames.skipped) == ["empty.mcap", "junk.mcap"]
+    assert any("junk.mcap" in w for w in warnings) and any("truncated" in w for w in warnings)
+    assert len(frames.runs) == 4 and frames.runs["truncated"].sum() == 1
+    assert set(frames.runs["variant"]) == {"default", "task.reward_progress=0.1"}
+    rows = tables.build(frames.episodes[~frames.episodes["log"].str.contains("killed")],
+                        "comparison")
+    easy = rows[(rows["group"] == "easy") & (rows["variant"] == "default")].iloc[0]
+    assert easy["seeds"] == 2 and easy["episodes"] == 20
+    assert easy["success_rate_mean"] == pytest.approx(0.7)
+    assert easy["success_rate_std"] == pytest.approx(pd.Series([0.8, 0.6]).std())
+    assert easy["drop_rate_mean"] == pytest.approx(0.1)
+    assert easy["paper_success"] == pytest.approx(0.954)
+    flips = rows[rows["group"] == tables.NEEDS_FLIP].iloc[0]
+    assert flips["episodes"] == 10  # the even hard episodes of both seeds
+    shaped = rows[rows["variant"] == "task.reward_progress=0.1"]
+    assert shaped["success_rate_mean"].tolist() == [pytest.approx(0.3)]
+
+
+def test_cli_prints_the_table_and_writes_frames_and_plots(sweep, tmp_path, capsys):
+    out = tmp_path / "out"
+    main([str(sweep / "0"), str(sweep / "1"), "--out", str(out), "--table", "comparison"])
+    text = capsys.readouterr().out
+    assert "| ppo | easy | 2 | 20 | 70.0 ± 14.1 % | 95.4 % |" in text
+    for name in ("runs", "iterations", "episodes"):
+        parquet, csv = pd.read_parquet(out / f"{name}.parquet"), pd.read_csv(out / f"{name}.csv")
+        assert len(parquet) == len(csv) > 0
+    assert (out / "table_comparison.csv").is_file()
+    assert (out / "learning_curves.png").stat().st_size > 1000
+    assert (out / "by_group.png").stat().st_size > 1000
+    main([str(sweep / "0"), "--out", str(out), "--table", "comparison", "--format", "csv"])
+    assert capsys.readouterr().out.count("ppo,default,easy") == 1
+
+
+def test_cli_refuses_paths_without_logs(tmp_path, capsys):
+    with pytest.raises(SystemExit) as end:
+        main([str(tmp_path / "nowhere")])
+    assert end.value.code == 2 and "nowhere" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SystemExit) as end:
+        main([str(tmp_path / "empty")])
+    assert end.value.code == 2
+
+
+def test_variant_keeps_only_what_changes_the_policy():
+    assert variant(["seed=3", "mode=eval", "goals=hard", "eval.episodes=500",
+                    "hydra.run.dir=x", "checkpoint=a/policy.pt"]) == "default"
+    assert variant(["task.reward_progress=0.1", "seed=1",
+                    "goals.train_groups=[easy,hard]"]) == (
+        "goals.train_groups=[easy,hard] task.reward_progress=0.1")

@@ -13,6 +13,7 @@ import pytest
 from inhand_exp.record import read_log
 
 APP = [sys.executable, "-c", "from inhand_exp.cli import main; main()"]
+SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
 # a tiny training and evaluation budget: the CLI runs end to end in seconds
 FAST = ["train.frames=8", "learner.frames_per_batch=8", "learner.minibatch_size=4",
         "train.num_envs=2", "train.backend=serial",
@@ -82,8 +83,9 @@ def test_existing_log_is_never_overwritten(tmp_path):
 JOBLIB = ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
 
 
-@pytest.mark.parametrize("launcher", [[], JOBLIB, [*JOBLIB, "train.backend=parallel"]],
-                         ids=["basic", "joblib", "joblib-worker-processes"])
+@pytest.mark.parametrize("launcher", [[], JOBLIB, [*JOBLIB, "train.backend=parallel"],
+                                      ["hydra/launcher=submitit_local"]],
+                         ids=["basic", "joblib", "joblib-worker-processes", "submitit-local"])
 def test_two_job_multirun_leaves_two_readable_logs(tmp_path, launcher):
     """Under joblib, jobs whose environments run in worker processes work too (joblib's
     'loky' start method must not reach the spawned workers)."""
@@ -236,3 +238,41 @@ def test_ddpg_trains_and_evaluates_end_to_end_with_the_same_logs(tmp_path):
     assert episode["sim_time_s"] <= 0.5 + 1e-6
     assert log.topic("/episode/action") == []
     assert (tmp_path / "ddpg" / "policy.pt").is_file()
+
+
+def test_a_study_trains_each_policy_once_and_skips_finished_jobs_when_run_again(tmp_path):
+    """Two evaluation jobs of one policy (train.store): one trains it, the other reuses it. The
+    study run again skips both; a job without its done marker runs again, keeping its old log."""
+    store, sweep = tmp_path / "store", tmp_path / "study"
+    args = ["-m", "goals=easy,medium", "goals.train_groups=[easy,medium]",
+            f"train.store={store}", f"hydra.sweep.dir={sweep}"]
+    first = inhand_exp(*args, cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    assert first.stdout.count("reusing the policy in") == 1
+    (policy,) = store.glob("ppo-pole-noise_none-seed0-*/policy.pt")
+    trained = [len(read_log(sweep / j / "run.mcap").topic("/train/iteration")) for j in "01"]
+    assert sorted(trained) == [0, 1]  # one job trained, the other only evaluated
+    for j in "01":
+        assert len(read_log(sweep / j / "run.mcap").topic("/eval/episode")) == 1
+        assert (sweep / j / "done.json").is_file()
+    stamp = policy.stat().st_mtime_ns
+    again = inhand_exp(*args, cwd=tmp_path)
+    assert again.returncode == 0 and again.stdout.count("skipped") == 2, again.stdout
+    (sweep / "1" / "done.json").unlink()  # as if job 1 had been killed
+    before = (sweep / "1" / "run.mcap").read_bytes()
+    third = inhand_exp(*args, cwd=tmp_path)
+    assert third.returncode == 0, third.stderr
+    assert (sweep / "1" / "run-interrupted.mcap").read_bytes() == before  # kept as it was
+    assert (sweep / "1" / "done.json").is_file() and "reusing the policy" in third.stdout
+    assert policy.stat().st_mtime_ns == stamp  # never trained again
+
+
+def test_the_sweep_files_compose(tmp_path):
+    for study, extra in (("comparison", ["+recipe=ddpg", "goals=hard"]),
+                         ("robustness", ["+recipe=ppo", "perturb=thicker", "noise=paper"]),
+                         ("cube", ["+recipe=ppo"])):
+        res = subprocess.run([*APP, "--config-dir", str(SWEEPS), "--config-name", study,
+                              *extra, "+profile=quick", "--cfg", "job"], cwd=tmp_path,
+                             capture_output=True, text=True, timeout=120)
+        assert res.returncode == 0, (study, res.stderr)
+        assert "store: logs/studies/" in res.stdout and "episodes: 20" in res.stdout

@@ -8,6 +8,7 @@ run's own overrides (``RUN_DIR/.hydra/overrides.yaml``) followed by the new ones
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -48,13 +49,28 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
             raise FileNotFoundError(f"{what} {name} not found")
     from inhand_exp.experiment import prepare, run_job
 
+    done = run_dir / DONE
+    if done.is_file() and not cfg.resume:
+        print(f"{run_dir}: finished earlier ({done}); skipped")
+        return run_dir / cfg.log.file
     job = prepare(cfg, run_dir)  # every input read and checked: a refusal writes nothing
-    log_path = fresh_log_path(run_dir, cfg.log.file) if cfg.resume else run_dir / cfg.log.file
+    log_path = run_dir / cfg.log.file
+    if cfg.resume:
+        log_path = fresh_log_path(run_dir, cfg.log.file)
+    elif log_path.exists():  # an interrupted attempt: its files are kept beside the new ones
+        kept = []
+        for old in (log_path, run_dir / "goals.csv"):
+            if old.exists():
+                aside = fresh_log_path(run_dir, f"{old.stem}-interrupted{old.suffix}")
+                old.rename(aside)
+                kept.append(aside.name)
+        print(f"{run_dir}: an earlier attempt did not finish; kept as {', '.join(kept)}")
     with RunLog(log_path, chunk_size=cfg.log.chunk_size_bytes,
                 flush_every_s=cfg.log.flush_every_s) as log:
         log.write("/run/config", run_config_message(cfg, run_dir, overrides))
         log.flush()
-        run_job(cfg, run_dir, log, job)
+        summary = run_job(cfg, run_dir, log, job)
+    done.write_text(json.dumps({"log": log_path.name, "summary": summary}, default=float) + "\n")
     return log_path
 
 
@@ -83,6 +99,7 @@ def resume_argv(argv: list[str]) -> list[str]:
             "hydra.output_subdir=null"]
 
 
+DONE = "done.json"  # written when a run finishes: a sweep run again skips it
 REFUSED = 2  # the exit code of every refused input (bad config value, file, checkpoint)
 _started = False  # the job function was entered: Hydra composed the config
 

@@ -248,6 +248,10 @@ class TrainConfig:
     workers: int = spec(2, "Worker processes for the environments (<= cores).", gt=0)
     backend: EnvBackend = spec(EnvBackend.parallel, "Batched env: parallel or serial.")
     checkpoint_every: int = spec(1, "Iterations between checkpoints.", gt=0)
+    store: str | None = spec(None, "Directory of shared policies (sweeps): each policy (learner, "
+                             "object, noise, seed, recipe) is trained there once, under a lock, "
+                             "and reused by every run that needs it; None trains in the run "
+                             "directory.")
 
 
 @dataclass

@@ -7,7 +7,10 @@ meet the run log, the terminal and the files of the run directory (``policy.pt``
 from __future__ import annotations
 
 import csv
+import fcntl
+import hashlib
 import importlib.resources
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -15,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError
 from inhand_exp.control.hand import HandModel
@@ -87,10 +90,45 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,
         say(f"resuming from {run_dir / CHECKPOINT}: iteration {learner.iteration}, "
             f"{learner.frames} frames")
     if job.mode in ("train", "train_eval"):
-        _train(cfg, learner, job.target, run_dir, log, say)
+        if cfg.train.store and not job.resumed:
+            _train_shared(cfg, learner, job.target, log, say)
+        else:
+            _train(cfg, learner, job.target, run_dir, log, say)
     if job.mode in ("eval", "train_eval"):
         return _evaluate(cfg, learner, run_dir, log, say, job.goals)
     return None
+
+
+def policy_key(cfg: DictConfig) -> str:
+    """The name of this run's policy in ``train.store``: learner, object, noise and seed, and a
+    digest of everything else that shapes the policy (the task, the training goals, the
+    learner's settings, the budget), but not what only the evaluation uses (the goal group
+    tested, the perturbation of the simulated object, ``eval.*``, ``log.*``)."""
+    c = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    for key in ("perturb", "eval", "log", "mode", "checkpoint", "resume"):
+        c.pop(key, None)
+    c["goals"] = {k: v for k, v in c["goals"].items() if k not in ("name", "test_pairs")}
+    if not c["goals"]["train_groups"]:
+        c["goals"]["train_groups"] = [cfg.goals.name]  # it trains on the tested group
+    c["train"] = {k: c["train"][k] for k in ("frames", "num_envs")}
+    digest = hashlib.sha256(json.dumps(c, sort_keys=True).encode()).hexdigest()[:10]
+    return f"{cfg.learner.name}-{cfg.object.name}-noise_{cfg.noise.name}-seed{cfg.seed}-{digest}"
+
+
+def _train_shared(cfg, learner: Learner, target: int, log: RunLog, say) -> None:
+    """Train in ``train.store/<policy_key>``, once for every run that needs that policy: the
+    first run to get there trains (or continues an interrupted training) while holding the
+    store's lock; the others wait for it, then load its policy."""
+    store = Path(cfg.train.store) / policy_key(cfg)
+    store.mkdir(parents=True, exist_ok=True)
+    with open(store.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if (store / CHECKPOINT).is_file():
+            learner.load(store / CHECKPOINT)
+        if learner.frames >= target:
+            say(f"reusing the policy in {store} ({learner.frames} frames)")
+            return
+        _train(cfg, learner, target, store, log, say)
 
 
 def _train(cfg, learner: Learner, target: int, run_dir: Path, log: RunLog, say) -> None:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
+from omegaconf import ListConfig, OmegaConf
 
 from inhand_exp.record.reader import LogError, read_log
 
@@ -42,10 +43,8 @@ def _policy_overrides(cfg: dict) -> list[str]:
     if ckpt:
         saved = Path(ckpt).parent / ".hydra" / "overrides.yaml"
         if saved.is_file():
-            import yaml
-
-            loaded = yaml.safe_load(saved.read_text())
-            if isinstance(loaded, list):
+            loaded = OmegaConf.load(saved)
+            if isinstance(loaded, ListConfig):
                 return [str(o) for o in loaded]
     return list(cfg.get("overrides", []))
 

@@ -10,7 +10,8 @@ periods). Everything else is the mid level's, through the same scene and task ob
 - success from the simulated pose within the task's tolerances;
 - the drop test of ``control.execute``: the object not held (PyBullet's contacts) for
   ``DROP_GRACE_S``, or the simulation blowing up;
-- reward: the paper's sparse +5 at the goal (and ``task.reward_progress`` shaping if set);
+- reward: the paper's sparse +5 at the goal (``task.reward_progress`` is the mid level's and is
+  not paid here);
 - time limit: ``task.time_limit_s`` simulated seconds.
 
 ``valid`` is always true (every torque is a legal action) and ``outcome`` says how the step ended
@@ -131,7 +132,6 @@ class TorqueEnv(EnvBase):
             td["reward"] = torch.zeros(1)
             return td
         tau = tensordict["action"].detach().double().numpy()
-        before = self.task.to_go(self.world.object_pose())
         world = self.world if self.snapshots is None else self.snapshots
         if self.snapshots is not None:
             self.snapshots.new_action()
@@ -151,7 +151,7 @@ class TorqueEnv(EnvBase):
                     outcome = "dropped"
             else:
                 self.lost_for = 0.0
-        v = self.task.judge(outcome in ("dropped", "unstable"), self.period_s, before=before)
+        v = self.task.judge(outcome in ("dropped", "unstable"), self.period_s)
         td = self._output(outcome, done=v.terminated or v.truncated, terminated=v.terminated,
                           truncated=v.truncated)
         td["reward"] = torch.tensor([v.reward], dtype=torch.float32)

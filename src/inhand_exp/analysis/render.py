@@ -1,0 +1,159 @@
+"""``inhand-render RUN.mcap [--episode N] [-o FILE.gif|FILE.mp4] [--fps F]``: replay one
+evaluation episode from its ``/sim/state`` messages.
+
+Each frame draws what the simulator held at that time: the palm, each finger's two links from
+its joint angles (forward kinematics of the run's own hand config), the fingertips, the
+simulated object (the nominal one scaled by the run's perturbation) at its pose, the contact
+forces, and the goal pose as a dashed outline; the title gives the time and, at the end, the
+episode's outcome. GIF needs nothing more (Pillow); MP4 needs ``ffmpeg`` on the PATH.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shutil
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib import animation  # noqa: E402
+from matplotlib.patches import Polygon  # noqa: E402
+
+from inhand_exp.control.grasp import rotation  # noqa: E402
+from inhand_exp.record.reader import LogError, read_log  # noqa: E402
+
+
+class RenderError(ValueError):
+    """Nothing to render: no such episode, no states, a run log without its config."""
+
+
+def box(pose, length: float, width: float) -> np.ndarray:
+    """Corners (4, 2) of the object at ``pose``: long axis along its local z."""
+    hx, hz = width / 2, length / 2
+    local = np.array([[-hx, -hz], [hx, -hz], [hx, hz], [-hx, hz]])
+    return np.asarray(pose[:2]) + local @ rotation(pose[2]).T
+
+
+def finger_points(q, base_x: float, base_z: float, l1: float, l2: float) -> np.ndarray:
+    q1, q12 = q[0], q[0] + q[1]
+    elbow = (base_x + l1 * math.cos(q1), base_z + l1 * math.sin(q1))
+    tip = (elbow[0] + l2 * math.cos(q12), elbow[1] + l2 * math.sin(q12))
+    return np.array([(base_x, base_z), elbow, tip])
+
+
+def episode_frames(path: Path, episode: int | None) -> tuple[dict, list[dict], dict | None]:
+    """The run's config, the episode's ``/sim/state`` messages and its ``/eval/episode``."""
+    try:
+        log = read_log(path)
+    except LogError as err:
+        raise RenderError(f"{path}: not a run log ({err})") from None
+    configs = log.topic("/run/config")
+    if not configs:
+        raise RenderError(f"{path}: no /run/config message: not a run log of inhand-exp")
+    states = log.topic("/sim/state")
+    if not states:
+        raise RenderError(f"{path}: no /sim/state messages (log.sim_state_hz was 0, or the run "
+                          f"did not evaluate)")
+    have = sorted({m["episode"] for m in states})
+    ep = have[0] if episode is None else episode
+    if ep not in have:
+        raise RenderError(f"{path}: no states of episode {ep}; episodes with states: "
+                          f"{have[0]}..{have[-1]} ({len(have)})")
+    frames = sorted((m for m in states if m["episode"] == ep), key=lambda m: m["sim_time_s"])
+    result = next((m for m in log.topic("/eval/episode") if m["episode"] == ep), None)
+    return configs[0]["config"], frames, result
+
+
+def render(path: Path, episode: int | None = None, out: Path | None = None,
+           fps: float = 20.0) -> Path:
+    """Write the episode's replay to ``out`` (default: ``episode-N.gif`` beside the log)."""
+    cfg, frames, result = episode_frames(path, episode)
+    ep = frames[0]["episode"]
+    out = out or path.parent / f"episode-{ep}.gif"
+    suffix = out.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise RenderError(f"{out}: the output must be a .gif or a .mp4")
+    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise RenderError("MP4 needs ffmpeg on the PATH; write a .gif instead")
+    hand, obj, p = cfg["hand"], cfg["object"], cfg.get("perturb", {})
+    length = obj["length_m"] * p.get("length_scale", 1.0)
+    width = obj["width_m"] * p.get("width_scale", 1.0)
+    bases, base_z = hand["finger_base_x_m"], hand["base_z_m"]
+    l1, l2 = hand["link_lengths_m"]
+    r = hand["tip_radius_m"]
+
+    fig, ax = plt.subplots(figsize=(5, 6))
+    ax.set_aspect("equal")
+    span = max(abs(b) for b in bases) + hand.get("palm_overhang_m", 0.06) + 0.05
+    ax.set_xlim(-span, span)
+    ax.set_ylim(base_z - hand.get("palm_thickness_m", 0.02) - 0.02, base_z + l1 + l2 + 0.3)
+    ax.axhspan(base_z - hand.get("palm_thickness_m", 0.02), base_z, color="0.6")  # the palm
+    if result is not None:
+        ax.add_patch(Polygon(box(result["xg"], length, width), fill=False, ls="--", ec="green",
+                             label="goal"))
+    body = ax.add_patch(Polygon(box(frames[0]["object_pose"], length, width), fc="tan",
+                                ec="saddlebrown"))
+    links = [ax.plot([], [], "-o", color="steelblue", lw=4, ms=4)[0] for _ in bases]
+    tips = [plt.Circle((0, 0), r, color="navy") for _ in bases]
+    for t in tips:
+        ax.add_patch(t)
+    forces = ax.quiver(np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), color="red",
+                       angles="xy", scale_units="xy", scale=100.0)
+    title = ax.set_title("")
+
+    def draw(k: int):
+        m = frames[k]
+        body.set_xy(box(m["object_pose"], length, width))
+        q = m["joint_q"]
+        for i, bx in enumerate(bases):
+            pts = finger_points(q[2 * i:2 * i + 2], bx, base_z, l1, l2)
+            links[i].set_data(pts[:, 0], pts[:, 1])
+            tips[i].center = pts[2]
+        xy, uv = np.zeros((3, 2)), np.zeros((3, 2))
+        th = m["object_pose"][2]
+        for c in m["contacts"]:  # the normal force, drawn along the line to the object centre
+            xy[c["finger"]] = c["position"]
+            d = np.array(m["object_pose"][:2]) - np.array(c["position"])
+            n = d / (np.linalg.norm(d) + 1e-9)
+            uv[c["finger"]] = n * c["normal_force_n"]
+        forces.set_offsets(xy)
+        forces.set_UVC(uv[:, 0], uv[:, 1])
+        text = f"episode {ep}   t = {m['sim_time_s']:.2f} s   theta = {math.degrees(th):.0f} deg"
+        if result is not None and k == len(frames) - 1:
+            outcome = "success" if result["success"] else (
+                "dropped" if result["dropped"] else "timeout")
+            text += f"   {outcome}"
+        title.set_text(text)
+        return [body, *links, *tips, forces, title]
+
+    anim = animation.FuncAnimation(fig, draw, frames=len(frames), blit=False)
+    writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else \
+        animation.FFMpegWriter(fps=fps)
+    anim.save(out, writer=writer)
+    plt.close(fig)
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="inhand-render", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("log", type=Path, help="a run.mcap with /sim/state messages")
+    parser.add_argument("--episode", type=int, default=None,
+                        help="episode number (default: the first with states)")
+    parser.add_argument("-o", "--output", type=Path, default=None, help="FILE.gif or FILE.mp4")
+    parser.add_argument("--fps", type=float, default=20.0)
+    args = parser.parse_args(argv)
+    if not args.log.is_file():
+        print(f"inhand-render: {args.log}: no such file", file=sys.stderr)
+        raise SystemExit(2)
+    try:
+        out = render(args.log, args.episode, args.output, args.fps)
+    except RenderError as err:
+        print(f"inhand-render: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
+    print(f"episode replay written to {out}")

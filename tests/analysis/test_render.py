@@ -1,0 +1,48 @@
+"""inhand-render: an evaluation episode's /sim/state messages become an animated GIF."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from PIL import Image
+
+from inhand_exp.analysis.render import RenderError, main, render
+from inhand_exp.record import RunLog
+
+APP = [sys.executable, "-c", "from inhand_exp.cli import main; main()"]
+
+
+@pytest.fixture(scope="module")
+def eval_log(tmp_path_factory):
+    """A tiny trained-and-evaluated run that recorded its states."""
+    tmp = tmp_path_factory.mktemp("render")
+    res = subprocess.run([*APP, "train.frames=8", "learner.frames_per_batch=8",
+                          "learner.minibatch_size=4", "train.num_envs=2",
+                          "train.backend=serial", "learner.epochs=1", "eval.episodes=2",
+                          "task.max_actions=3", "goals=easy", f"hydra.run.dir={tmp / 'run'}"],
+                         cwd=tmp, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    return tmp / "run" / "run.mcap"
+
+
+def test_an_episode_becomes_a_gif(eval_log, tmp_path):
+    out = render(eval_log, episode=1, out=tmp_path / "ep.gif", fps=10)
+    with Image.open(out) as gif:
+        assert gif.n_frames > 5 and gif.size[0] > 100
+
+
+def test_refusals_name_the_problem(eval_log, tmp_path, capsys):
+    with pytest.raises(RenderError, match="no states of episode 7; episodes with states: 0..1"):
+        render(eval_log, episode=7, out=tmp_path / "x.gif")
+    with pytest.raises(RenderError, match="must be a .gif or a .mp4"):
+        render(eval_log, episode=0, out=tmp_path / "x.avi")
+    with RunLog(tmp_path / "bare.mcap"):
+        pass
+    with pytest.raises(RenderError, match="no /run/config"):
+        render(tmp_path / "bare.mcap")
+    (tmp_path / "junk.mcap").write_text("junk")
+    with pytest.raises(SystemExit) as end:
+        main([str(tmp_path / "junk.mcap")])
+    assert end.value.code == 2 and "not a run log" in capsys.readouterr().err

@@ -276,3 +276,27 @@ def test_the_sweep_files_compose(tmp_path):
                              capture_output=True, text=True, timeout=120)
         assert res.returncode == 0, (study, res.stderr)
         assert "store: logs/studies/" in res.stdout and "episodes: 20" in res.stdout
+
+
+@pytest.mark.parametrize("launcher", [[], JOBLIB], ids=["basic", "joblib"])
+def test_a_failing_job_does_not_stop_the_sweep(tmp_path, launcher):
+    """Two of four jobs get a bad goal file: the other two finish with intact logs, the
+    failures are named at the end with their error (exit 1), and the analysis reads the rest."""
+    from inhand_exp.analysis.frames import load
+
+    bad = tmp_path / "bad.csv"
+    bad.write_text("group,x0_x\n")
+    sweep = tmp_path / "sweep"
+    res = inhand_exp("-m", "seed=0,1", f"eval.goals_file=null,{bad}",
+                     f"hydra.sweep.dir={sweep}", *launcher, cwd=tmp_path)
+    assert res.returncode == 1, res.stderr
+    tail = res.stderr[res.stderr.index("2 job(s) of the sweep"):]
+    assert "  1: " in tail and "  3: " in tail and "missing column(s)" in tail
+    for job in ("0", "2"):
+        log = read_log(sweep / job / "run.mcap")
+        assert not log.truncated and len(log.topic("/eval/episode")) == 1
+    for job in ("1", "3"):
+        assert "missing column(s)" in (sweep / job / "failed.txt").read_text()
+        assert not (sweep / job / "run.mcap").exists()
+    frames = load([sweep], warn=lambda m: None)
+    assert len(frames.runs) == 2 and len(frames.episodes) == 2

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.experimental.callback import Callback
+from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError, register_configs, validate
@@ -100,6 +102,7 @@ def resume_argv(argv: list[str]) -> list[str]:
 
 
 DONE = "done.json"  # written when a run finishes: a sweep run again skips it
+FAILED = "failed.txt"  # written when a job of a sweep fails, with its error
 REFUSED = 2  # the exit code of every refused input (bad config value, file, checkpoint)
 _started = False  # the job function was entered: Hydra composed the config
 
@@ -131,20 +134,63 @@ def _discard(run_dir: Path) -> None:
         run_dir.rmdir()
 
 
+class FailureReport(Callback):
+    """At the end of a sweep: name every job that failed, with its error, and exit 1.
+
+    A job of a sweep that fails (a refused input, or an error on the way) writes ``failed.txt``
+    into its directory and ends; the sweep goes on with the other jobs, whatever the launcher.
+    """
+
+    def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
+        sweep = Path(config.hydra.sweep.dir)
+        failed = sorted(sweep.rglob(FAILED)) if sweep.is_dir() else []
+        if not failed:
+            return
+        print(f"inhand-exp: {len(failed)} job(s) of the sweep in {sweep} failed:",
+              file=sys.stderr)
+        for path in failed:
+            first = path.read_text().strip().splitlines()[0]
+            print(f"  {path.parent.relative_to(sweep)}: {first}", file=sys.stderr)
+        global _started
+        _started = True  # Hydra composed and ran: this exit is not a refused command line
+        raise SystemExit(1)
+
+
+def _fail_job(run_dir: Path, err: BaseException, refused: bool) -> None:
+    """Record a sweep job's failure in its directory (the sweep goes on without it)."""
+    import traceback
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    text = f"{type(err).__name__}: {err}" if not refused else str(err)
+    detail = "" if refused else "\n" + "".join(traceback.format_exception(err))
+    (run_dir / FAILED).write_text(text.splitlines()[0] + "\n" + detail)
+    print(f"inhand-exp: job {run_dir} failed: {text.splitlines()[0]}", file=sys.stderr)
+
+
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def _app(cfg: DictConfig) -> None:
     global _started
     _started = True
     hc = HydraConfig.get()
     run_dir = Path(hc.runtime.output_dir)
+    in_sweep = hc.mode == RunMode.MULTIRUN
+    (run_dir / FAILED).unlink(missing_ok=True)  # a job run again starts with a clean slate
     try:
         check_choices(hc.runtime.choices)
         log_path = run(cfg, run_dir, list(hc.overrides.task))
     except (ConfigError, CheckpointError, GoalsError, FileNotFoundError) as err:
+        if in_sweep:
+            _fail_job(run_dir, err, refused=True)
+            return
         print(f"inhand-exp: {err}", file=sys.stderr)
         if not cfg.get("resume"):
             _discard(run_dir)
         raise SystemExit(REFUSED) from None
+    except Exception as err:  # noqa: BLE001 - a sweep outlives one job's error
+        if not in_sweep:
+            raise
+        _fail_job(run_dir, err, refused=False)
+        return
     print(f"run written to {log_path.parent}  (log: {log_path})")
 
 

@@ -185,3 +185,42 @@ def test_limp_finger_in_the_env_is_a_drop_when_the_pole_falls(compose_cfg):
         if fell > 0.02:
             assert out["dropped"].item() and out["done"].item(), (finger, fell)
     assert max(falls) > 0.02  # some finger's loss lets the pole fall
+
+
+def test_a_nan_torque_ends_the_episode_as_a_failure_and_the_env_goes_on(compose_cfg,
+                                                                        monkeypatch):
+    """A controller fault (NaN torques half-way through a repose) never reaches the simulator:
+    the step ends as ``unstable`` (a failure, counted as a drop) and the next episode plays."""
+    from inhand_exp.control.repose import Repose
+
+    good = Repose.torques
+    calls = {"n": 0}
+
+    def faulty(self, obs):
+        calls["n"] += 1
+        tau = good(self, obs)
+        return tau if calls["n"] < 20 or tau is None else np.full(6, np.nan)
+
+    monkeypatch.setattr(Repose, "torques", faulty)
+    env = PrimitiveEnv(compose_cfg(), goals=one_pair(0.05) * 2, seed=0)
+    td = env.reset()
+    plus_x = next(a.index for a in env.actions if a.name == "repose +x")
+    out = env.step(td.set("action", torch.tensor(plus_x)))["next"]
+    assert OUTCOMES[int(out["outcome"])] == "unstable"
+    assert out["done"].item() and out["dropped"].item() and not out["success"].item()
+    assert np.isfinite(env.world.object_pose()).all()
+    monkeypatch.setattr(Repose, "torques", good)
+    td = env.reset()
+    np.testing.assert_allclose(env.world.object_pose(), X0, atol=1e-9)
+    out = env.step(td.set("action", torch.tensor(plus_x)))["next"]
+    assert OUTCOMES[int(out["outcome"])] == "done"
+
+
+def test_the_world_refuses_a_nan_torque_and_clips_an_absurd_one(compose_cfg):
+    env = PrimitiveEnv(compose_cfg(), goals=one_pair(0.05), seed=0)
+    env.reset()
+    with pytest.raises(ValueError, match="non-finite joint torque"):
+        env.world.step(np.array([0.0, np.nan, 0.0, 0.0, 0.0, 0.0]))
+    env.world.step(np.full(6, 1e12))  # clipped to hand.max_torque_nm: a physical command
+    pose, twist = env.world.object_state()
+    assert np.isfinite(pose).all() and np.isfinite(twist).all()

@@ -167,6 +167,9 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
         tau = primitive.torques(Observation(q, qd, pose + offset, twist, k * world.dt))
         if tau is None:
             return _safe_stop(world, q, k, fell, state_check, settle_s, check_every)
+        if not np.isfinite(tau).all():  # a controller fault: never handed to the simulator
+            return Outcome(False, "unstable", f"non-finite torque {np.round(tau, 3).tolist()}",
+                           k * world.dt, k)
         world.step(tau)
         if (k + 1) % check_every:
             continue

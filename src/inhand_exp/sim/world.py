@@ -280,9 +280,13 @@ class World:
 
     def step(self, tau: np.ndarray) -> None:
         """Apply joint torques ``tau`` (6,) (N m, clipped to the limit) for one control period:
-        ``sim.control_substeps`` physics steps (``dt`` seconds)."""
+        ``sim.control_substeps`` physics steps (``dt`` seconds). A non-finite torque is refused
+        with ``ValueError`` (clipping would turn a NaN into a limit torque unnoticed)."""
         cid, hi = self._cid, self.max_torque
-        tau = [min(hi, max(-hi, v)) for v in tau.tolist()]
+        values = tau.tolist()
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f"non-finite joint torque {values}")
+        tau = [min(hi, max(-hi, v)) for v in values]
         for _ in range(self.substeps):
             # PyBullet clears a TORQUE_CONTROL torque after each step: set it every step
             for i, f in enumerate(self.fingers):

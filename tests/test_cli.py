@@ -300,3 +300,32 @@ def test_a_failing_job_does_not_stop_the_sweep(tmp_path, launcher):
         assert not (sweep / job / "run.mcap").exists()
     frames = load([sweep], warn=lambda m: None)
     assert len(frames.runs) == 2 and len(frames.episodes) == 2
+
+
+def test_resuming_from_one_checkpoint_twice_gives_identical_training(tmp_path):
+    """Resume is deterministic: two copies of an interrupted run, resumed alike, log the same
+    iterations and save the same networks. (A resumed run does not equal one that never
+    stopped: the episodes under way at the cut are not saved, so the resumed environments start
+    fresh episodes, seeded from the seed and the iteration; the networks, optimiser, counters
+    and torch's RNG are restored exactly.)"""
+    import shutil
+
+    import torch
+
+    base = tmp_path / "base"
+    first = inhand_exp("mode=train", "train.frames=16", f"hydra.run.dir={base}", *FAST[1:],
+                       cwd=tmp_path, fast=False)
+    assert first.returncode == 0, first.stderr
+    states, logs = [], []
+    for name in ("a", "b"):
+        shutil.copytree(base, tmp_path / name)
+        res = inhand_exp(f"resume={tmp_path / name}", "train.frames=32", cwd=tmp_path,
+                         fast=False)
+        assert res.returncode == 0, res.stderr
+        log = read_log(tmp_path / name / "run-2.mcap").topic("/train/iteration")
+        logs.append([(m["iteration"], m["frames"], m["losses"], m["mean_return"]) for m in log])
+        states.append(torch.load(tmp_path / name / "policy.pt", weights_only=True))
+    assert logs[0] == logs[1] and [m[0] for m in logs[0]] == [3, 4]
+    for key in ("actor", "critic"):
+        for k, v in states[0][key].items():
+            assert torch.equal(v, states[1][key][k]), (key, k)

@@ -22,7 +22,10 @@ FAST = ["train.frames=8", "learner.frames_per_batch=8", "learner.minibatch_size=
 
 def inhand_exp(*args: str, cwd: Path, fast: bool = True) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
-    return subprocess.run([*APP, *args, *(FAST if fast else [])], cwd=cwd, env=env,
+    # mode=train_eval first: the tests train tiny policies (the default, demo, is tested apart;
+    # a resumed run takes its mode from the run it resumes)
+    first = [] if any(a.startswith("resume=") for a in args) else ["mode=train_eval"]
+    return subprocess.run([*APP, *first, *args, *(FAST if fast else [])], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=300)
 
 
@@ -329,3 +332,30 @@ def test_resuming_from_one_checkpoint_twice_gives_identical_training(tmp_path):
     for key in ("actor", "critic"):
         for k, v in states[0][key].items():
             assert torch.equal(v, states[1][key][k]), (key, k)
+
+
+def test_the_default_run_shows_the_packaged_policy_on_every_group(tmp_path):
+    """`inhand-exp` alone: the packaged Table II policy on a sample of each group, said so on
+    screen, beside the paper, with one hard episode replayed."""
+    run = tmp_path / "demo"
+    res = subprocess.run([*APP, "eval.episodes=2", "train.num_envs=2", "train.backend=serial",
+                          "log.progress=false", f"hydra.run.dir={run}"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "the packaged Table II policy" in res.stdout and "first 2 test pairs" in res.stdout
+    for group in ("easy", "medium", "hard"):
+        assert f"ppo {group} pole" in res.stdout
+    episodes = read_log(run / "run.mcap").topic("/eval/episode")
+    assert sorted(e["group"] for e in episodes) == ["easy"] * 2 + ["hard"] * 2 + ["medium"] * 2
+    assert list(run.glob("episode-*.gif")) and "replayed in" in res.stdout
+    assert not (run / "policy.pt").exists()  # nothing trained
+    for banner in ("pybullet build time", "Running HiGHS"):  # C libraries' banners: silenced
+        assert banner not in res.stdout + res.stderr
+
+
+def test_help_names_the_app_and_lists_only_real_options(tmp_path):
+    res = subprocess.run([*APP, "--help"], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0 and res.stdout.startswith("inhand-exp:")
+    groups = res.stdout.split("== Configuration groups ==")[1].split("== Config ==")[0]
+    assert "schema" not in groups and "learner: ppo, ddpg, search" in groups

@@ -73,7 +73,26 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
         log.flush()
         summary = run_job(cfg, run_dir, log, job)
     done.write_text(json.dumps({"log": log_path.name, "summary": summary}, default=float) + "\n")
+    if str(cfg.mode) == "demo" and cfg.log.sim_state_hz > 0:
+        from inhand_exp.analysis.render import RenderError, render
+
+        try:
+            gif = render(log_path, first_success(log_path))
+            print(f"one hard episode replayed in {gif} (inhand-render {log_path} --episode N "
+                  f"for another)")
+        except RenderError as err:
+            print(f"inhand-exp: no replay: {err}", file=sys.stderr)
     return log_path
+
+
+def first_success(log_path: Path) -> int | None:
+    """The first successful hard episode of a demo log (None: the first with states)."""
+    from inhand_exp.record import read_log
+
+    for m in read_log(log_path).topic("/eval/episode"):
+        if m["group"] == "hard" and m["success"]:
+            return m["episode"]
+    return None
 
 
 def resume_argv(argv: list[str]) -> list[str]:

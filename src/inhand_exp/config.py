@@ -29,6 +29,7 @@ def spec(default: Any, doc: str, **rules: Any) -> Any:
 
 
 class Mode(StrEnum):
+    demo = "demo"
     train = "train"
     eval = "eval"
     train_eval = "train_eval"
@@ -287,9 +288,10 @@ class Config:
     eval: EvalConfig = field(default_factory=EvalConfig)
     log: LogConfig = field(default_factory=LogConfig)
     seed: int = spec(0, "Seed of everything random in the run.", ge=0)
-    mode: Mode = spec(Mode.train_eval, "What the run does: train, eval, train_eval, or goals "
-                      "(write the goals group's test set of eval.episodes pairs to goals.csv, "
-                      "no policy involved).")
+    mode: Mode = spec(Mode.demo, "What the run does: demo (the packaged Table II policy, or "
+                      "checkpoint=, on eval.episodes test pairs of each goal group), train, "
+                      "eval, train_eval, or goals (write the goals group's test set of "
+                      "eval.episodes pairs to goals.csv, no policy involved).")
     checkpoint: str | None = spec(None, "Policy checkpoint to evaluate or to train on from.")
     resume: str | None = spec(None, "Run directory of an interrupted training to continue.")
 
@@ -379,6 +381,9 @@ def _check_value(key: str, value: Any, rules: Any) -> None:
 
 def _check_consistency(cfg: DictConfig) -> None:
     """Cross-field rules: matching object and primitives, whole step ratios, joint limits."""
+    if cfg.mode == Mode.demo and cfg.learner.name != "ppo":
+        raise ConfigError(f"mode=demo shows the packaged PPO policy; for learner="
+                          f"{cfg.learner.name} use mode=train_eval or mode=eval")
     if cfg.mode == Mode.eval and not cfg.checkpoint and cfg.learner.name != "search":
         raise ConfigError("mode=eval needs checkpoint=PATH (a policy.pt of an earlier run)")
     if "frames_per_batch" in cfg.learner and cfg.learner.frames_per_batch % cfg.train.num_envs:

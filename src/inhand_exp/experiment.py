@@ -31,6 +31,12 @@ from inhand_exp.task.actions import action_table
 from inhand_exp.task.goals import GoalPair, goal_set, load_goals, save_goals
 
 CHECKPOINT = "policy.pt"
+PACKAGED = "table2_ppo_seed0.pt"  # in inhand_exp/policies/: what mode=demo shows
+DEMO_GROUPS = ("easy", "medium", "hard")
+
+
+def packaged_policy() -> Path:
+    return Path(str(importlib.resources.files("inhand_exp").joinpath("policies", PACKAGED)))
 
 
 def derived_seed(seed: int, *stream: int) -> int:
@@ -71,6 +77,8 @@ def prepare(cfg: DictConfig, run_dir: Path) -> Job:
     elif cfg.checkpoint:
         learner.load(Path(cfg.checkpoint))
         target += learner.frames
+    elif mode == "demo":
+        learner.load(packaged_policy())
     goals = None
     if mode in ("eval", "train_eval") and cfg.eval.goals_file:
         goals = test_goals(cfg)
@@ -86,6 +94,8 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,
         write_goal_set(cfg, run_dir, say)
         return None
     learner = job.learner
+    if job.mode == "demo":
+        return _demo(cfg, learner, run_dir, log, say)
     if job.resumed:
         say(f"resuming from {run_dir / CHECKPOINT}: iteration {learner.iteration}, "
             f"{learner.frames} frames")
@@ -189,10 +199,31 @@ def write_goal_set(cfg, run_dir: Path, say) -> Path:
     return path
 
 
+def _demo(cfg, learner: Learner, run_dir: Path, log: RunLog, say) -> dict[str, float]:
+    """``mode=demo``: the policy on the first ``eval.episodes`` test pairs of each group, with
+    the states of the last group's episodes recorded (for ``inhand-render``)."""
+    which = cfg.checkpoint or f"the packaged Table II policy ({PACKAGED}: PPO, seed 0, " \
+        f"{learner.frames:,} frames of the README recipe)"
+    say(f"inhand-exp demo: {which}, evaluated on the first {cfg.eval.episodes} test pairs of "
+        f"each goal group ({', '.join(DEMO_GROUPS)}). The README's Table II uses 500 pairs "
+        f"per group. To train a policy of your own instead: inhand-exp mode=train_eval "
+        f"train.frames=163840 'goals.train_groups=[easy,medium,hard]' task.reward_progress=0.1")
+    out = {}
+    for group in DEMO_GROUPS:
+        sub = cfg.copy()
+        sub.goals.name = group
+        if group != DEMO_GROUPS[-1]:
+            sub.log.sim_state_hz = 0.0
+        summary = _evaluate(sub, learner, run_dir, log, say, goals_file=f"goals-{group}.csv")
+        out.update({f"{group}_{k}": v for k, v in summary.items()})
+    return out
+
+
 def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
-              goals: list[GoalPair] | None = None) -> dict[str, float]:
+              goals: list[GoalPair] | None = None, goals_file: str = "goals.csv"
+              ) -> dict[str, float]:
     goals = goals if goals is not None else test_goals(cfg)
-    save_goals(goals, run_dir / "goals.csv")
+    save_goals(goals, run_dir / goals_file)
     labels = {"object": cfg.object.name, "perturb": cfg.perturb.name, "noise": cfg.noise.name,
               "learner": cfg.learner.name, "seed": int(cfg.seed)}
     bar = ProgressBar(len(goals), "episodes", enabled=cfg.log.progress)

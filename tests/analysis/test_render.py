@@ -18,7 +18,7 @@ APP = [sys.executable, "-c", "from inhand_exp.cli import main; main()"]
 def eval_log(tmp_path_factory):
     """A tiny trained-and-evaluated run that recorded its states."""
     tmp = tmp_path_factory.mktemp("render")
-    res = subprocess.run([*APP, "train.frames=8", "learner.frames_per_batch=8",
+    res = subprocess.run([*APP, "mode=train_eval", "train.frames=8", "learner.frames_per_batch=8",
                           "learner.minibatch_size=4", "train.num_envs=2",
                           "train.backend=serial", "learner.epochs=1", "eval.episodes=2",
                           "task.max_actions=3", "goals=easy", f"hydra.run.dir={tmp / 'run'}"],

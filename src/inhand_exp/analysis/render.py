@@ -11,6 +11,7 @@ episode's outcome. GIF needs nothing more (Pillow); MP4 needs ``ffmpeg`` on the 
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import shutil
 import sys
@@ -19,6 +20,7 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+logging.getLogger("matplotlib").setLevel(logging.WARNING)  # no "Animation.save using" line
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib import animation  # noqa: E402

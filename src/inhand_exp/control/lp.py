@@ -13,12 +13,15 @@ from __future__ import annotations
 import highspy
 import numpy as np
 
+from inhand_exp.quiet import c_output_silenced
+
 INF = highspy.kHighsInf
 _OPTIMAL = highspy.HighsModelStatus.kOptimal
 
 
 def _new_solver() -> highspy.Highs:
-    h = highspy.Highs()
+    with c_output_silenced():  # its banner, in every process
+        h = highspy.Highs()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("presolve", "off")  # tiny dense problems: presolve only costs time
     return h

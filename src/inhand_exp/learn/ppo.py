@@ -170,7 +170,8 @@ class PPO:
         save_checkpoint(self.state_dict(), path)
 
     def load(self, path: Path) -> None:
-        """Resume from ``path``; a checkpoint for other observation or action sizes is refused."""
+        """Resume from ``path`` (or, from a packaged policy that holds the actor alone, only
+        act); a checkpoint for other observation or action sizes is refused."""
         state = read_checkpoint(path, "ppo")
         if (state.get("obs_dim"), state.get("n_actions")) != (self.obs_dim, self.n_actions):
             raise CheckpointError(
@@ -185,9 +186,10 @@ class PPO:
 
         def load() -> None:
             self.actor.load_state_dict(state["actor"])
-            self.critic.load_state_dict(state["critic"])
-            self.optim.load_state_dict(state["optim"])
-            torch.set_rng_state(state["torch_rng"])
+            if "critic" in state:  # a packaged policy holds the actor alone: it only acts
+                self.critic.load_state_dict(state["critic"])
+                self.optim.load_state_dict(state["optim"])
+                torch.set_rng_state(state["torch_rng"])
 
         restore(path, load)
         self.iteration, self.frames = int(state["iteration"]), int(state["frames"])

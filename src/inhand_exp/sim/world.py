@@ -24,10 +24,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pybullet as pb
 
 from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
+from inhand_exp.quiet import c_output_silenced
 from inhand_exp.sim.urdf import finger_urdf, object_urdf, palm_urdf
+
+with c_output_silenced():  # PyBullet prints its build banner at import, in every process
+    import pybullet as pb
 
 TIP_LINK = 2  # link index of the fingertip in each finger
 BODY_LINK = 2  # link index of the object body in the object chain

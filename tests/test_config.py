@@ -11,7 +11,8 @@ from omegaconf import OmegaConf
 from inhand_exp.cli import CONF_DIR
 from inhand_exp.config import GROUP_SCHEMAS, LEARNER_SCHEMAS, Config, ConfigError, validate
 
-GROUPS = sorted(p.name for p in CONF_DIR.iterdir() if p.is_dir())
+SWEEP_GROUPS = ("profile", "recipe")  # selected with +group=option by the sweeps
+GROUPS = sorted(p.name for p in CONF_DIR.iterdir() if p.is_dir() and p.name not in SWEEP_GROUPS)
 
 
 def options(group: str) -> list[str]:
@@ -29,11 +30,26 @@ def test_every_group_has_options_and_a_schema():
                          [(g, o) for g in GROUPS for o in options(g)])
 def test_every_option_composes_and_validates(compose_cfg, group, option):
     extra = [f"object={option}"] if group == "primitives" else []
-    cfg = compose_cfg(f"{group}={option}", *extra)
+    cfg = compose_cfg("mode=train_eval", f"{group}={option}", *extra)
     validate(cfg)
     assert OmegaConf.get_type(cfg[group]) is not dict  # typed by its schema
     if hasattr(cfg[group], "name"):
         assert cfg[group].name == option or group in ("sim", "hand")
+
+
+@pytest.mark.parametrize(("group", "option"),
+                         [(g, o) for g in SWEEP_GROUPS for o in options(g)])
+def test_every_sweep_option_composes_and_validates(compose_cfg, group, option):
+    cfg = compose_cfg("mode=train_eval", f"+{group}={option}")
+    validate(cfg)
+    if group == "recipe":
+        assert cfg.learner.name == option
+
+
+def test_the_default_mode_is_the_demo_and_refuses_other_learners(compose_cfg):
+    assert str(compose_cfg().mode) == "demo"
+    with pytest.raises(ConfigError, match="mode=demo shows the packaged PPO policy"):
+        validate(compose_cfg("learner=ddpg"))
 
 
 def test_defaults_are_the_paper_setting(compose_cfg):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from PIL import Image
 
@@ -27,10 +28,16 @@ def eval_log(tmp_path_factory):
     return tmp / "run" / "run.mcap"
 
 
-def test_an_episode_becomes_a_gif(eval_log, tmp_path):
-    out = render(eval_log, episode=1, out=tmp_path / "ep.gif", fps=10)
+def test_an_episode_becomes_a_gif_whose_frames_differ_and_png_stills(eval_log, tmp_path):
+    out = render(eval_log, episode=1, out=tmp_path / "ep.gif", fps=10, snapshots=3)
     with Image.open(out) as gif:
         assert gif.n_frames > 5 and gif.size[0] > 100
+        gif.seek(0)
+        first = np.asarray(gif.convert("RGB")).copy()
+        gif.seek(gif.n_frames - 1)
+        last = np.asarray(gif.convert("RGB"))
+    assert (first != last).any()  # the hand and the object moved
+    assert len(list(tmp_path.glob("ep-t*.png"))) == 3
 
 
 def test_refusals_name_the_problem(eval_log, tmp_path, capsys):

@@ -1,5 +1,5 @@
-"""``inhand-render RUN.mcap [--episode N] [-o FILE.gif|FILE.mp4] [--fps F]``: replay one
-evaluation episode from its ``/sim/state`` messages.
+"""``inhand-render RUN.mcap [--episode N] [-o FILE.gif|FILE.mp4] [--fps F] [--snapshots K]``:
+replay one evaluation episode from its ``/sim/state`` messages.
 
 Each frame draws what the simulator held at that time: the palm, each finger's two links from
 its joint angles (forward kinematics of the run's own hand config), the fingertips, the
@@ -72,8 +72,9 @@ def episode_frames(path: Path, episode: int | None) -> tuple[dict, list[dict], d
 
 
 def render(path: Path, episode: int | None = None, out: Path | None = None,
-           fps: float = 20.0) -> Path:
-    """Write the episode's replay to ``out`` (default: ``episode-N.gif`` beside the log)."""
+           fps: float = 20.0, snapshots: int = 0) -> Path:
+    """Write the episode's replay to ``out`` (default: ``episode-N.gif`` beside the log), and
+    ``snapshots`` PNG stills evenly spaced over it (``<out>-t<time>s.png``)."""
     cfg, frames, result = episode_frames(path, episode)
     ep = frames[0]["episode"]
     out = out or path.parent / f"episode-{ep}.gif"
@@ -133,6 +134,9 @@ def render(path: Path, episode: int | None = None, out: Path | None = None,
         title.set_text(text)
         return [body, *links, *tips, forces, title]
 
+    for k in np.linspace(0, len(frames) - 1, snapshots).round().astype(int) if snapshots else []:
+        draw(int(k))
+        fig.savefig(out.with_name(f"{out.stem}-t{frames[k]['sim_time_s']:06.2f}s.png"), dpi=100)
     anim = animation.FuncAnimation(fig, draw, frames=len(frames), blit=False)
     writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else \
         animation.FFMpegWriter(fps=fps)
@@ -149,12 +153,16 @@ def main(argv: list[str] | None = None) -> None:
                         help="episode number (default: the first with states)")
     parser.add_argument("-o", "--output", type=Path, default=None, help="FILE.gif or FILE.mp4")
     parser.add_argument("--fps", type=float, default=20.0)
+    parser.add_argument("--snapshots", type=int, default=0,
+                        help="also write this many PNG stills, evenly spaced")
     args = parser.parse_args(argv)
+    if args.snapshots < 0 or not args.fps > 0:
+        parser.error("--snapshots must be >= 0 and --fps > 0")
     if not args.log.is_file():
         print(f"inhand-render: {args.log}: no such file", file=sys.stderr)
         raise SystemExit(2)
     try:
-        out = render(args.log, args.episode, args.output, args.fps)
+        out = render(args.log, args.episode, args.output, args.fps, args.snapshots)
     except RenderError as err:
         print(f"inhand-render: {err}", file=sys.stderr)
         raise SystemExit(2) from None

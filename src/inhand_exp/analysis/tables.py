@@ -68,6 +68,11 @@ def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
     if eps.empty:
         return pd.DataFrame()
     out = over_seeds(per_seed(eps, keys), keys)
+    if "group" in out:  # the paper's order, the needs-flip row last
+        order = {g: i for i, g in enumerate(("easy", "medium", "hard", NEEDS_FLIP))}
+        out = out.sort_values(["learner", "variant", "group"],
+                              key=lambda c: c.map(order) if c.name == "group" else c,
+                              kind="stable").reset_index(drop=True)
     ref = ref[[*(k for k in keys if k != "variant"), "success_rate", "drop_rate",
                "avg_time_s"]].rename(
         columns={"success_rate": "paper_success", "drop_rate": "paper_drop",

@@ -5,6 +5,7 @@
                             [--only hold,repose,...] [overrides...]
     inhand-bench env [--workers W] [--steps N] [--seed S] [overrides...]
     inhand-bench graph [learner.resolution_m=M learner.resolution_rad=R ...]
+    inhand-bench load [--minutes M] [--workers W] [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -172,7 +173,8 @@ def speed(args, cfg: DictConfig) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", choices=("speed", "primitives", "env", "graph"))
+    parser.add_argument("what", choices=("speed", "primitives", "env", "graph", "load"))
+    parser.add_argument("--minutes", type=float, default=30.0, help="load: how long")
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
                         help="trials per section (default: the milestone's counts)")
@@ -193,7 +195,13 @@ def main(argv: list[str] | None = None) -> None:
         cfg = load_config(args.object, [*learner, *args.overrides])
     except (ConfigError, ConfigCompositionException) as err:
         sys.exit(f"inhand-bench: config error: {err}".splitlines()[0])
-    if args.what == "graph":
+    if args.what == "load":
+        from inhand_exp.bench.load import load_run
+
+        cfg.train.workers = args.workers
+        result = load_run(cfg, args.minutes, every_s=max(5.0, args.minutes * 60 / 60),
+                          seed=args.seed)
+    elif args.what == "graph":
         from inhand_exp.bench.graph import graph_size
 
         result = graph_size(cfg, seed=args.seed)

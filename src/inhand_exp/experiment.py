@@ -67,6 +67,9 @@ def prepare(cfg: DictConfig, run_dir: Path) -> Job:
     mode = str(getattr(cfg.mode, "value", cfg.mode))
     if mode == "goals":
         return Job(mode)
+    # the networks' initial weights and the actions sampled in training come from torch's
+    # generator: seeded from the run's seed (a checkpoint then restores its own state)
+    torch.manual_seed(derived_seed(cfg.seed, 3))
     learner = make_learner(cfg)
     target = cfg.train.frames
     if cfg.resume:

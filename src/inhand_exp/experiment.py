@@ -23,6 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 from inhand_exp.config import ConfigError
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
+from inhand_exp.envs.batched import batched_env
 from inhand_exp.learn.evaluate import evaluate
 from inhand_exp.learn.registry import Learner, make_learner
 from inhand_exp.progress import ProgressBar
@@ -168,7 +169,8 @@ def _train(cfg, learner: Learner, target: int, run_dir: Path, log: RunLog, say) 
         bar.update(int(m["frames"]), f"it {iteration}  success {m['success_rate']:5.1%}  "
                                      f"drops {m['drop_rate']:5.1%}")
 
-    env = learner.make_env(cfg, derived_seed(cfg.seed, 0, learner.iteration))
+    env = batched_env(cfg, derived_seed(cfg.seed, 0, learner.iteration),
+                      env_class=learner.env_class)
     try:
         learner.train(env, left, progress, checkpoint=run_dir / CHECKPOINT,
                       checkpoint_every=cfg.train.checkpoint_every)
@@ -238,9 +240,9 @@ def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
         bar.update(len(results), f"success {np.mean(results):5.1%}")
 
     torch.manual_seed(derived_seed(cfg.seed, 2))  # eval.sample draws from torch's generator
-    env = learner.make_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
-                           num_envs=min(cfg.train.num_envs, len(goals)),
-                           states_hz=cfg.log.sim_state_hz, once=True)
+    env = batched_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
+                      num_envs=min(cfg.train.num_envs, len(goals)),
+                      states_hz=cfg.log.sim_state_hz, once=True, env_class=learner.env_class)
     def on_action(rec: dict) -> None:
         log.write("/episode/action", rec)
 

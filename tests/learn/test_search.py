@@ -12,6 +12,7 @@ from inhand_exp.config import ConfigError, HandConfig, ObjectConfig
 from inhand_exp.control.grasp import Contacts
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
+from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.learn.search import Search
 from inhand_exp.task.goals import GoalPair
@@ -127,7 +128,7 @@ def test_search_plays_easy_pairs_to_the_goal(compose_cfg, tmp_path):
     search = Search(cfg)
     model = HM.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
     goals = goal_set(model, "easy", 4, seed=1234)
-    env = search.make_env(cfg, 0, goals=goals, num_envs=2, once=True)
+    env = batched_env(cfg, 0, goals=goals, num_envs=2, once=True, env_class=search.env_class)
     try:
         summary = evaluate(env, search.policy, goals)
     finally:

@@ -29,7 +29,7 @@ from torchrl.envs import EnvBase
 
 from inhand_exp.control.execute import REASONS, execute
 from inhand_exp.envs.snapshots import STATE_WIDTH, Snapshots
-from inhand_exp.envs.specs import declare_mid_level_specs
+from inhand_exp.envs.specs import declare_mid_level_specs, idle_output
 from inhand_exp.task.actions import action_table, feasibility, make_primitive
 from inhand_exp.task.goal_task import GoalTask
 from inhand_exp.task.goals import GoalPair
@@ -123,19 +123,12 @@ class PrimitiveEnv(EnvBase):
         self.last = td
         return td
 
-    def _idle_output(self, done: bool) -> TensorDict:
-        td = self.last.clone()
-        for key in ("done", "truncated"):
-            td[key] = torch.tensor([done])
-        td["terminated"] = torch.tensor([False])
-        return td
-
     # --- episodes -----------------------------------------------------------------------
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDict:
         if not self.task.reset(self.rng):
             self.idle = True
-            return self._idle_output(done=False)
+            return idle_output(self.last, done=False)
         pair = self.task.pair
         self.contacts = pair.contacts
         self.postures = {pair.contacts.posture}  # reached so far in this episode
@@ -146,7 +139,7 @@ class PrimitiveEnv(EnvBase):
 
     def _step(self, tensordict: TensorDictBase) -> TensorDict:
         if self.idle:
-            td = self._idle_output(done=True)
+            td = idle_output(self.last, done=True)
             td["reward"] = torch.zeros(1)
             return td
         a = int(tensordict["action"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import torch
+from tensordict import TensorDictBase
 from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
@@ -24,3 +25,13 @@ def declare_mid_level_specs(env: EnvBase, n_actions: int) -> None:
         done=Categorical(2, shape=(1,), dtype=torch.bool),
         terminated=Categorical(2, shape=(1,), dtype=torch.bool),
         truncated=Categorical(2, shape=(1,), dtype=torch.bool))
+
+
+def idle_output(last: TensorDictBase, done: bool) -> TensorDictBase:
+    """What an environment that has played its goals (``once``) returns: its last observation,
+    truncated (``done``) on a step, never terminated."""
+    td = last.clone()
+    for key in ("done", "truncated"):
+        td[key] = torch.tensor([done])
+    td["terminated"] = torch.tensor([False])
+    return td

@@ -29,7 +29,7 @@ from torchrl.envs import EnvBase
 
 from inhand_exp.control.execute import DROP_GRACE_S
 from inhand_exp.envs.snapshots import STATE_WIDTH, Snapshots
-from inhand_exp.envs.specs import OBS_DIM
+from inhand_exp.envs.specs import OBS_DIM, idle_output
 from inhand_exp.sim.world import state_problem
 from inhand_exp.task.goal_task import GoalTask
 from inhand_exp.task.goals import GoalPair
@@ -110,17 +110,10 @@ class TorqueEnv(EnvBase):
         self.last = td
         return td
 
-    def _idle_output(self, done: bool) -> TensorDict:
-        td = self.last.clone()
-        for key in ("done", "truncated"):
-            td[key] = torch.tensor([done])
-        td["terminated"] = torch.tensor([False])
-        return td
-
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDict:
         if not self.task.reset(self.rng):
             self.idle = True
-            return self._idle_output(done=False)
+            return idle_output(self.last, done=False)
         self.lost_for = 0.0
         if self.snapshots is not None:
             self.snapshots.new_episode()
@@ -128,7 +121,7 @@ class TorqueEnv(EnvBase):
 
     def _step(self, tensordict: TensorDictBase) -> TensorDict:
         if self.idle:
-            td = self._idle_output(done=True)
+            td = idle_output(self.last, done=True)
             td["reward"] = torch.zeros(1)
             return td
         tau = tensordict["action"].detach().double().numpy()

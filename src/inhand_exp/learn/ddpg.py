@@ -28,12 +28,10 @@ from torchrl.modules import MLP, AdditiveGaussianModule, TanhModule, ValueOperat
 from torchrl.objectives import DDPGLoss, SoftUpdate
 
 from inhand_exp.config import DDPGConfig, HandConfig, typed
-from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.envs.torque_env import TorqueEnv
 from inhand_exp.learn.checkpoint import CheckpointError, read_checkpoint, restore, save_checkpoint
 from inhand_exp.learn.registry import Progress
-from inhand_exp.task.goals import GoalPair
 
 KEEP = ("observation", "action", ("next", "observation"), ("next", "reward"),
         ("next", "done"), ("next", "terminated"), ("next", "success"), ("next", "dropped"))
@@ -49,6 +47,7 @@ class DDPG:
     """Actor, critic, their targets, optimisers and the replay buffer."""
 
     per_action_log = False  # one action per control period: /eval/episode only
+    env_class = TorqueEnv
 
     def __init__(self, obs_dim: int, n_joints: int, max_torque: float, params: DDPGConfig):
         self.params, self.obs_dim, self.n_joints = params, obs_dim, n_joints
@@ -82,13 +81,6 @@ class DDPG:
     @property
     def policy(self) -> TensorDictSequential:
         return self.actor
-
-    @staticmethod
-    def make_env(cfg, seed: int, goals: list[GoalPair] | None = None,
-                 num_envs: int | None = None, states_hz: float = 0.0,
-                 once: bool = False) -> EnvBase:
-        return batched_env(cfg, seed, goals=goals, num_envs=num_envs, states_hz=states_hz,
-                           once=once, env_class=TorqueEnv)
 
     def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:

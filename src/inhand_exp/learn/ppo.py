@@ -23,13 +23,12 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from inhand_exp.config import PPOConfig, typed
-from inhand_exp.envs.batched import batched_env
+from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.learn.checkpoint import CheckpointError, read_checkpoint, restore, save_checkpoint
 from inhand_exp.learn.features import HandGeometry, ObservationFeatures
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import action_table
-from inhand_exp.task.goals import GoalPair
 
 
 class FeatureMLP(nn.Module):
@@ -78,6 +77,7 @@ class PPO:
     """
 
     per_action_log = True
+    env_class = PrimitiveEnv  # the batched mid-level environment
 
     def __init__(self, obs_dim: int, n_actions: int, params: PPOConfig,
                  hand: HandGeometry | None = None):
@@ -95,13 +95,6 @@ class PPO:
     @property
     def policy(self) -> ProbabilisticActor:
         return self.actor
-
-    @staticmethod
-    def make_env(cfg, seed: int, goals: list[GoalPair] | None = None,
-                 num_envs: int | None = None, states_hz: float = 0.0,
-                 once: bool = False) -> EnvBase:
-        return batched_env(cfg, seed, goals=goals, num_envs=num_envs, states_hz=states_hz,
-                           once=once)
 
     def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:

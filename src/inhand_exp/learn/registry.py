@@ -1,6 +1,6 @@
 """The learner seam: what ``experiment`` asks of a learner, and the registry of learners by name.
 
-A learner builds its own environments (the mid level for PPO and the graph search, joint
+A learner names the environment it acts in (the mid level for PPO and the graph search, joint
 torques for DDPG), trains for a number of frames reporting through a callback, acts through a
 TorchRL policy module, and saves and loads its state. ``experiment`` only ever calls
 ``make_learner(cfg)`` and the protocol below, so a new learner is one module and one line here.
@@ -16,7 +16,6 @@ from typing import Protocol
 from torchrl.envs import EnvBase
 
 from inhand_exp.config import ConfigError
-from inhand_exp.task.goals import GoalPair
 
 # iteration, metrics: "frames", "collect_s", "learn_s", "mean_reward", "success_rate",
 # "drop_rate", and the learner's losses under keys "loss_*"
@@ -29,11 +28,7 @@ class Learner(Protocol):
     iteration: int  # optimisation iterations done (over every resumed leg)
     frames: int  # environment frames learned from
     per_action_log: bool  # its evaluation logs each action (/episode/action): the mid level
-
-    def make_env(self, cfg, seed: int, goals: list[GoalPair] | None = None,
-                 num_envs: int | None = None, states_hz: float = 0.0,
-                 once: bool = False) -> EnvBase:
-        """The batched environment it acts in; ``goals``/``once`` as ``envs.batched``."""
+    env_class: type[EnvBase]  # what it acts in, batched by ``envs.batched.batched_env``
 
     def train(self, env: EnvBase, frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:

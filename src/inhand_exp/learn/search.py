@@ -38,11 +38,10 @@ from inhand_exp.config import ConfigError, PrimitivesConfig, SearchConfig, TaskC
 from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
-from inhand_exp.envs.batched import batched_env
+from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.learn.checkpoint import read_checkpoint, save_checkpoint
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import Action, action_table
-from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.graph import SIDES, Lattice, PoseGraph, build_graph
 from inhand_exp.task.rules import to_go
 
@@ -103,6 +102,7 @@ class Search:
     """The graph, and a policy that walks it (see the module docstring)."""
 
     per_action_log = True
+    env_class = PrimitiveEnv  # it walks the graph with the mid-level actions
 
     def __init__(self, cfg):
         self.cfg = cfg
@@ -143,13 +143,6 @@ class Search:
     def policy(self) -> SearchPolicy:
         return SearchPolicy(self.ensure_graph(), self.model, self.prim, self.rules,
                             self.actions)
-
-    @staticmethod
-    def make_env(cfg, seed: int, goals: list[GoalPair] | None = None,
-                 num_envs: int | None = None, states_hz: float = 0.0,
-                 once: bool = False) -> EnvBase:
-        return batched_env(cfg, seed, goals=goals, num_envs=num_envs, states_hz=states_hz,
-                           once=once)
 
     def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:

@@ -9,7 +9,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from inhand_exp.sim.world import state_problem
+from inhand_exp.sim.world import NonFiniteTorque, state_problem
 
 
 @dataclass(frozen=True)
@@ -167,10 +167,10 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
         tau = primitive.torques(Observation(q, qd, pose + offset, twist, k * world.dt))
         if tau is None:
             return _safe_stop(world, q, k, fell, state_check, settle_s, check_every)
-        if not np.isfinite(tau).all():  # a controller fault: never handed to the simulator
-            return Outcome(False, "unstable", f"non-finite torque {np.round(tau, 3).tolist()}",
-                           k * world.dt, k)
-        world.step(tau)
+        try:
+            world.step(tau)
+        except NonFiniteTorque as err:  # a controller fault: the world refused it
+            return Outcome(False, "unstable", str(err), k * world.dt, k)
         if (k + 1) % check_every:
             continue
         touched.update(world.hand_contacts())

@@ -30,7 +30,7 @@ from torchrl.envs import EnvBase
 from inhand_exp.control.execute import DROP_GRACE_S
 from inhand_exp.envs.snapshots import STATE_WIDTH, Snapshots
 from inhand_exp.envs.specs import OBS_DIM, idle_output
-from inhand_exp.sim.world import state_problem
+from inhand_exp.sim.world import NonFiniteTorque, state_problem
 from inhand_exp.task.goal_task import GoalTask
 from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.scene import build_scene
@@ -129,11 +129,12 @@ class TorqueEnv(EnvBase):
         if self.snapshots is not None:
             self.snapshots.new_action()
         outcome = "running"
-        if not np.all(np.isfinite(tau)):
-            outcome = "unstable"  # a NaN torque ends the episode as a failure
-        else:
+        try:
             for _ in range(self.steps):
                 world.step(tau)
+        except NonFiniteTorque:
+            outcome = "unstable"  # a NaN torque ends the episode as a failure
+        else:
             pose, twist = self.world.object_state()
             q, qd = self.world.joint_state()
             if state_problem(pose, twist, q, qd) is not None:

@@ -32,6 +32,10 @@ from inhand_exp.sim.urdf import finger_urdf, object_urdf, palm_urdf
 with c_output_silenced():  # PyBullet prints its build banner at import, in every process
     import pybullet as pb
 
+class NonFiniteTorque(ValueError):
+    """A NaN or infinite torque: a controller fault, never handed to PyBullet."""
+
+
 TIP_LINK = 2  # link index of the fingertip in each finger
 BODY_LINK = 2  # link index of the object body in the object chain
 
@@ -288,7 +292,7 @@ class World:
         cid, hi = self._cid, self.max_torque
         values = tau.tolist()
         if not all(math.isfinite(v) for v in values):
-            raise ValueError(f"non-finite joint torque {values}")
+            raise NonFiniteTorque(f"non-finite joint torque {values}")
         tau = [min(hi, max(-hi, v)) for v in values]
         for _ in range(self.substeps):
             # PyBullet clears a TORQUE_CONTROL torque after each step: set it every step

@@ -268,6 +268,9 @@ class LogConfig:
     file: str = spec("run.mcap", "Log file name inside the run directory.")
     sim_state_hz: float = spec(20.0, "Rate of /sim/state messages (Hz of sim time); 0 = off.",
                                ge=0)
+    scene_episodes: int = spec(10, "Evaluation episodes also drawn on /scene (Foxglove's 3D "
+                               "panel), one after another; 0 = off. Needs sim_state_hz > 0.",
+                               ge=0)
     chunk_size_bytes: int = spec(32 * 1024, "MCAP chunk size (bytes).", gt=0)
     flush_every_s: float = spec(2.0, "Longest wall time between flushes (s).", gt=0)
     progress: bool = spec(True, "Show a progress bar on the terminal.")

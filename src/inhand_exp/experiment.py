@@ -28,6 +28,7 @@ from inhand_exp.learn.evaluate import evaluate
 from inhand_exp.learn.registry import Learner, make_learner
 from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
+from inhand_exp.record.scene import SceneGeometry, SceneReplay
 from inhand_exp.task.actions import action_table
 from inhand_exp.task.goals import GoalPair, goal_set, load_goals, save_goals
 
@@ -233,11 +234,18 @@ def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
               "learner": cfg.learner.name, "seed": int(cfg.seed)}
     bar = ProgressBar(len(goals), "episodes", enabled=cfg.log.progress)
     results = []
+    scene = SceneReplay(log.write, SceneGeometry.from_config(cfg), cfg.log.scene_episodes,
+                        time.time_ns())
 
     def on_episode(rec: dict) -> None:
         log.write("/eval/episode", {**rec, **labels})
+        scene.on_episode(rec)
         results.append(rec["success"])
         bar.update(len(results), f"success {np.mean(results):5.1%}")
+
+    def on_state(rec: dict) -> None:
+        log.write("/sim/state", rec)
+        scene.on_state(rec)
 
     torch.manual_seed(derived_seed(cfg.seed, 2))  # eval.sample draws from torch's generator
     env = batched_env(cfg, derived_seed(cfg.seed, 1), goals=goals,
@@ -250,7 +258,7 @@ def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
     try:
         summary = evaluate(env, learner.policy, goals, on_episode=on_episode,
                            on_action=on_action if names else None,
-                           on_state=lambda r: log.write("/sim/state", r),
+                           on_state=on_state,
                            action_names=names, sample=cfg.eval.sample)
     finally:
         bar.close()

@@ -53,3 +53,26 @@ def test_refusals_name_the_problem(eval_log, tmp_path, capsys):
     with pytest.raises(SystemExit) as end:
         main([str(tmp_path / "junk.mcap")])
     assert end.value.code == 2 and "not a run log" in capsys.readouterr().err
+
+
+def test_the_log_draws_its_episodes_on_a_foxglove_scene(eval_log):
+    from mcap.reader import make_reader
+
+    from inhand_exp.record import read_log
+
+    log = read_log(eval_log)
+    states = log.topic("/sim/state")
+    scenes = [m for m in log.messages if m.topic == "/scene"]
+    assert len(scenes) == len(states) > 0  # both episodes (log.scene_episodes is 10)
+    objects = [next(e for e in m.data["entities"] if e["id"] == "object") for m in scenes]
+    poses = sorted(((s["episode"], s["sim_time_s"]), s["object_pose"]) for s in states)
+    drawn = [o["cubes"][0]["pose"]["position"] for o in objects]
+    np.testing.assert_allclose(sorted((p["x"], p["z"]) for p in drawn),
+                               sorted((x, z) for _, (x, z, _) in poses))
+    times = [m.log_time_ns for m in scenes]
+    assert times == sorted(times)  # one episode after the other
+    with open(eval_log, "rb") as f:
+        summary = make_reader(f).get_summary()
+    names = {summary.schemas[c.schema_id].name for c in summary.channels.values()
+             if c.topic == "/scene"}
+    assert names == {"foxglove.SceneUpdate"}  # what Foxglove's 3D panel looks for

@@ -9,9 +9,11 @@ import jsonschema
 import pytest
 
 from inhand_exp.record import TOPIC_SCHEMAS
+from inhand_exp.record.scene import SceneGeometry, scene_update
 from inhand_exp.record.schemas import check_required
 
-TOPICS = ["/run/config", "/train/iteration", "/eval/episode", "/episode/action", "/sim/state"]
+TOPICS = ["/run/config", "/train/iteration", "/eval/episode", "/episode/action", "/sim/state",
+          "/scene"]
 
 EXAMPLES: dict[str, dict[str, Any]] = {
     "/run/config": {
@@ -54,6 +56,12 @@ EXAMPLES: dict[str, dict[str, Any]] = {
         ],
     },
 }
+EXAMPLES["/scene"] = scene_update(
+    EXAMPLES["/sim/state"],
+    SceneGeometry.from_config({"hand": {"finger_base_x_m": [-0.12, 0.0, 0.12],
+                                        "link_lengths_m": [0.16, 0.16], "tip_radius_m": 0.012},
+                               "object": {"width_m": 0.02, "length_m": 0.5}}),
+    1_735_732_800_000_000_000, goal=[0.0, 0.3, 0.2], caption="episode 3", clear=True)
 
 # One plausible mistake per topic that the schema must reject.
 MISTAKES = [
@@ -63,6 +71,8 @@ MISTAKES = [
     ("/episode/action", "valid", "yes"),
     ("/sim/state", "contacts", [{"finger": 0, "position": [0.0, 0.1, 0.2],
                                  "normal_force_n": 1.0}]),
+    ("/scene", "entities", [{"id": "object", "frame_id": "world",
+                             "cubes": [{"size": {"x": 0.02, "y": 0.05, "z": 0.5}}]}]),
 ]
 
 UNITS = {"_s": "(s)", "_m": "(m)", "_rad": "(rad)", "_n": "(N)"}

@@ -28,6 +28,7 @@ from matplotlib.patches import Polygon  # noqa: E402
 
 from inhand_exp.control.grasp import rotation  # noqa: E402
 from inhand_exp.record.reader import LogError, read_log  # noqa: E402
+from inhand_exp.record.scene import finger_points  # noqa: E402
 
 
 class RenderError(ValueError):
@@ -39,13 +40,6 @@ def box(pose, length: float, width: float) -> np.ndarray:
     hx, hz = width / 2, length / 2
     local = np.array([[-hx, -hz], [hx, -hz], [hx, hz], [-hx, hz]])
     return np.asarray(pose[:2]) + local @ rotation(pose[2]).T
-
-
-def finger_points(q, base_x: float, base_z: float, l1: float, l2: float) -> np.ndarray:
-    q1, q12 = q[0], q[0] + q[1]
-    elbow = (base_x + l1 * math.cos(q1), base_z + l1 * math.sin(q1))
-    tip = (elbow[0] + l2 * math.cos(q12), elbow[1] + l2 * math.sin(q12))
-    return np.array([(base_x, base_z), elbow, tip])
 
 
 def episode_frames(path: Path, episode: int | None) -> tuple[dict, list[dict], dict | None]:

@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from inhand_exp.record.scene import scene_update_schema
+
 # Rules every schema here keeps, so that Foxglove can turn it into message definitions:
 # each property has exactly one "type" (never a list, never "null"), every object schema has
 # "properties" (possibly empty), every array has "items" with one scalar or object type.
@@ -228,6 +230,7 @@ TOPIC_SCHEMAS: dict[str, dict[str, Any]] = {
     "/eval/episode": EVAL_EPISODE,
     "/episode/action": EPISODE_ACTION,
     "/sim/state": SIM_STATE,
+    "/scene": scene_update_schema(DRAFT_2020_12, NON_FINITE_NOTE),
 }
 
 _REQUIRED: dict[str, tuple[str, ...]] = {

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from inhand_exp.record import read_log
+from inhand_exp.task.goals import load_goals
 
 APP = [sys.executable, "-c", "from inhand_exp.cli import main; main()"]
 SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
@@ -162,7 +163,7 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
 def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
     from inhand_exp.config import HandConfig, ObjectConfig
     from inhand_exp.control.hand import HandModel
-    from inhand_exp.task.goals import goal_set, load_goals
+    from inhand_exp.task.goals import goal_set
 
     res = inhand_exp("mode=goals", "goals=hard", "eval.episodes=6",
                      f"hydra.run.dir={tmp_path / 'set'}", cwd=tmp_path, fast=False)
@@ -186,6 +187,20 @@ def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
     episodes = read_log(tmp_path / "ev" / "run.mcap").topic("/eval/episode")
     assert [e["xg"] for e in episodes] == [list(p.xg) for p in back]
     assert [e["needs_flip"] for e in episodes] == [p.needs_flip for p in back]
+
+
+def test_a_fixed_start_pose_starts_every_pair_and_an_unholdable_one_is_refused(tmp_path):
+    cube = ["object=cube", "goals=hard", "goals.hard_goal_posture=any", "eval.episodes=4"]
+    res = inhand_exp("mode=goals", *cube, "goals.x0=[0,0.25,0]",
+                     f"hydra.run.dir={tmp_path / 'set'}", cwd=tmp_path, fast=False)
+    assert res.returncode == 0, res.stderr
+    pairs = load_goals(tmp_path / "set" / "goals.csv")
+    assert [list(p.x0) for p in pairs] == [[0.0, 0.25, 0.0]] * 4
+    assert len({p.contacts for p in pairs}) == 1 and len({tuple(p.xg) for p in pairs}) == 4
+    bad = inhand_exp("mode=goals", *cube, "goals.x0=[0,0.6,0]",
+                     f"hydra.run.dir={tmp_path / 'bad'}", cwd=tmp_path, fast=False)
+    assert bad.returncode == 2 and "goals.x0=[0.0, 0.6, 0.0]: no grasp" in bad.stderr
+    assert not (tmp_path / "bad").exists()
 
 
 def test_resume_continues_an_interrupted_training_in_its_run_directory(tmp_path):

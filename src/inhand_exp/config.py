@@ -150,6 +150,10 @@ class GoalsConfig:
                                   "posture than the start's (other, as the authors' code drew "
                                   "them; arbitrary pairs need a flip too rarely) or any pose "
                                   "the hand holds (any).", choices=("other", "any"))
+    x0: list[float] | None = spec(None, "A fixed initial pose [x (m), z (m), theta (rad)] "
+                                  "for every pair, training and test, held by one grasp drawn "
+                                  "once from goals.seed (the paper's cube study); null: each "
+                                  "pair draws its own.", length=3)
     train_groups: list[str] = spec([], "Groups the training episodes are drawn from, "
                                    "uniformly; empty: this group only.",
                                    choices=("easy", "medium", "hard"))
@@ -366,6 +370,8 @@ def _check_node(node: DictConfig, path: str) -> None:
 
 
 def _check_value(key: str, value: Any, rules: Any) -> None:
+    if value is None:  # an optional field left unset
+        return
     if "length" in rules and len(value) != rules["length"]:
         raise ConfigError(f"{key} must have {rules['length']} entries, got {len(value)}: "
                           f"{list(value)}")

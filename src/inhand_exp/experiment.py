@@ -30,7 +30,7 @@ from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
 from inhand_exp.record.scene import SceneGeometry, SceneReplay
 from inhand_exp.task.actions import action_table
-from inhand_exp.task.goals import GoalPair, goal_set, load_goals, save_goals
+from inhand_exp.task.goals import GoalPair, goal_set, load_goals, save_goals, start_of
 
 CHECKPOINT = "policy.pt"
 PACKAGED = "table2_ppo_seed0.pt"  # in inhand_exp/policies/: what mode=demo shows
@@ -67,6 +67,8 @@ def prepare(cfg: DictConfig, run_dir: Path) -> Job:
     in all; otherwise a ``checkpoint`` is a starting point for ``train.frames`` more.
     """
     mode = str(getattr(cfg.mode, "value", cfg.mode))
+    if cfg.goals.x0 is not None:  # a fixed start the hand cannot hold: refused before any run
+        start_of(HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2), cfg.goals)
     if mode == "goals":
         return Job(mode)
     # the networks' initial weights and the actions sampled in training come from torch's
@@ -192,7 +194,7 @@ def test_goals(cfg) -> list[GoalPair]:
         return load_goals(cfg.eval.goals_file, model)
     return goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed,
                     workspace=Workspace.from_config(cfg.task),
-                    hard_posture=cfg.goals.hard_goal_posture)
+                    hard_posture=cfg.goals.hard_goal_posture, start=start_of(model, cfg.goals))
 
 
 def write_goal_set(cfg, run_dir: Path, say) -> Path:

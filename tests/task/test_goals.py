@@ -9,6 +9,7 @@ from inhand_exp.config import HandConfig, ObjectConfig
 from inhand_exp.control.hand import HandModel
 from inhand_exp.task.goals import (
     GoalsError,
+    fixed_start,
     goal_set,
     load_goals,
     reachable,
@@ -65,6 +66,24 @@ def test_hard_sets_need_flips_and_easy_and_medium_sets_never(model):
             assert grasp_of(model, p.contacts.posture, p.xg + np.array(d)) is None
     for group in ("easy", "medium"):
         assert not any(p.needs_flip for p in goal_set(model, group, 12, seed=11))
+
+
+def test_a_fixed_start_is_shared_by_every_pair_and_holds(model):
+    """``goals.x0`` (the paper's cube study): one start pose and one grasp for every pair."""
+    from inhand_exp.control.sample import holds_at
+
+    cube = HandModel.from_config(HandConfig(), ObjectConfig(name="cube", length_m=0.1,
+                                                            width_m=0.1), 9.81)
+    start = fixed_start(cube, [0.0, 0.25, 0.0], seed=4)
+    assert fixed_start(cube, [0.0, 0.25, 0.0], seed=4)[1] == start[1]  # drawn from the seed
+    assert holds_at(cube, start[1], start[0]) is not None
+    for split in ("test", "train"):
+        pairs = goal_set(cube, "hard", 6, seed=4, split=split, hard_posture="any", start=start)
+        assert all(np.array_equal(p.x0, [0.0, 0.25, 0.0]) and p.contacts == start[1]
+                   for p in pairs)
+        assert len({tuple(p.xg) for p in pairs}) == 6  # the goals still vary
+    with pytest.raises(GoalsError, match=r"goals.x0=\[0.0, 0.6, 0.0\]: no grasp"):
+        fixed_start(cube, [0.0, 0.6, 0.0], seed=4)
 
 
 def test_save_load_round_trip_and_no_overwrite(model, tmp_path):

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from inhand_exp.control.hand import GeometryError
-from inhand_exp.task.goals import GoalPair, sample_pair
+from inhand_exp.task.goals import GoalPair, Start, sample_pair, start_of
 from inhand_exp.task.rules import reached, reward, to_go
 from inhand_exp.task.scene import Scene
 
@@ -49,14 +49,17 @@ class GoalTask:
     actions or ``time_limit_s`` simulated seconds, whichever comes first (None: no such limit).
     ``pool`` > 0: keep the first ``pool`` training pairs drawn and, once there are that many,
     draw episodes from them uniformly (drawing a pair takes about 0.2 s, far longer than an
-    end-to-end episode that drops the object at once).
+    end-to-end episode that drops the object at once). ``start``: the pose and grasp every
+    training pair starts from (``goals.x0``), or None.
     """
 
     def __init__(self, scene: Scene, groups: tuple[str, ...] = ("medium",),
                  hard_posture: str = "other", goals: list[GoalPair] | None = None,
                  once: bool = False, max_actions: int | None = None,
-                 time_limit_s: float | None = None, pool: int = 0):
+                 time_limit_s: float | None = None, pool: int = 0,
+                 start: Start | None = None):
         self.scene, self.rules = scene, scene.rules
+        self.start = start
         self.groups, self.hard_posture = tuple(groups), hard_posture
         self.goals, self.once = goals, once and goals is not None
         self.max_actions, self.time_limit_s = max_actions, time_limit_s
@@ -75,7 +78,9 @@ class GoalTask:
         limit = ({"time_limit_s": scene.rules.time_limit_s} if end_to_end
                  else {"max_actions": scene.rules.max_actions})
         return cls(scene, tuple(goals["train_groups"]) or (goals["name"],),
-                   goals["hard_goal_posture"], **limit, **kwargs)
+                   goals["hard_goal_posture"], **limit,
+                   start=start_of(scene.model, goals) if kwargs.get("goals") is None else None,
+                   **kwargs)
 
     @property
     def exhausted(self) -> bool:
@@ -91,7 +96,7 @@ class GoalTask:
             else self.groups[0]
         s = self.scene
         return sample_pair(s.model, group, rng, s.workspace, self.hard_posture,
-                           (s.rules.success_tol_m, s.rules.success_tol_rad))
+                           (s.rules.success_tol_m, s.rules.success_tol_rad), start=self.start)
 
     def reset(self, rng: np.random.Generator) -> bool:
         """Start the next episode: the object at X0, the fingers on its simulated surface, at

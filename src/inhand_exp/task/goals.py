@@ -13,7 +13,8 @@ X0 is a pose of the workspace with a random grasp that holds it. Then:
 
 X0 and Xg are drawn uniformly from the part of the workspace the hand holds
 (``sample.random_grasp``), so poses only one posture holds (large tilts) are as likely as the
-upright ones every posture holds.
+upright ones every posture holds. With ``goals.x0`` every pair starts from that pose instead,
+held by one grasp drawn once from the seed (``fixed_start``; the paper's cube study).
 
 Every pair carries ``needs_flip``: no grasp of the initial posture holds the object at Xg, nor
 anywhere within the success tolerance round it, by the controllers' own model
@@ -90,17 +91,44 @@ def _inside(ws: Workspace, pose: np.ndarray) -> bool:
     return bool(np.all(pose >= np.array(ws.low)) and np.all(pose <= np.array(ws.high)))
 
 
+Start = tuple[np.ndarray, Contacts]
+
+
+def fixed_start(model: HandModel, pose, seed: int) -> Start:
+    """``pose`` and one grasp that holds it, drawn once from ``seed`` (a random posture among
+    those that hold it, then random contacts): the start of every pair when ``goals.x0`` is
+    set, as in the paper's cube study."""
+    pose = np.asarray(pose, dtype=float)
+    rng = np.random.default_rng([seed, 7])
+    choices = postures(model)
+    for k in rng.permutation(len(choices)):
+        contacts = grasp_of(model, choices[int(k)], pose, rng, tries=60)
+        if contacts is not None and holds_at(model, contacts, pose, press=0.0005,
+                                             margin=0.1) is not None:
+            return pose, contacts
+    raise GoalsError(f"goals.x0={pose.round(4).tolist()}: no grasp of the hand holds the "
+                     f"object there (reach, joint limits, links and palm clear, a squeeze)")
+
+
+def start_of(model: HandModel, goals) -> Start | None:
+    """The fixed start of the ``goals`` config node (``x0``), or None: each pair draws one."""
+    x0 = goals.get("x0")
+    return None if x0 is None else fixed_start(model, list(x0), int(goals["seed"]))
+
+
 def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
                 workspace: Workspace | None = None, hard_posture: str = "other",
-                tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500) -> GoalPair:
-    """One pair of ``group``, by rejection sampling."""
+                tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500,
+                start: Start | None = None) -> GoalPair:
+    """One pair of ``group``, by rejection sampling; from ``start`` (a pose and its grasp)
+    when given, else from a random grasp of the workspace."""
     if group not in GROUPS:
         raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
     if hard_posture not in HARD_POSTURES:
         raise ValueError(f"hard_posture must be one of {HARD_POSTURES}, got {hard_posture!r}")
     ws = workspace or Workspace()
     for _ in range(max_tries):
-        x0, c0, _ = random_grasp(model, rng, ws)
+        x0, c0 = start if start is not None else random_grasp(model, rng, ws)[:2]
         if group == "easy":
             xg = x0 + rng.uniform(-EASY_STEP, EASY_STEP)
             path = [x0 + (xg - x0) * s for s in np.linspace(0.2, 1.0, 5)]
@@ -119,13 +147,15 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
 
 
 def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test",
-             workspace: Workspace | None = None, hard_posture: str = "other") -> list[GoalPair]:
-    """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i)."""
+             workspace: Workspace | None = None, hard_posture: str = "other",
+             start: Start | None = None) -> list[GoalPair]:
+    """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i) and
+    ``start``."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     g, s = GROUPS.index(group), SPLITS.index(split)
     return [sample_pair(model, group, np.random.default_rng([seed, g, s, i]), workspace,
-                        hard_posture) for i in range(n)]
+                        hard_posture, start=start) for i in range(n)]
 
 
 def to_frame(pairs: list[GoalPair]) -> pd.DataFrame:

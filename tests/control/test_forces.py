@@ -246,3 +246,77 @@ def test_landing_span_bounds_every_strict_hold(seed):
             assert strict_hold(model, contacts.moved(finger, coord=(lo + hi) / 2, face=face),
                                PrimitivesConfig())
     assert spans >= 1
+
+
+def _slide_lp(contacts: Contacts, sliding: int, drag: float, theta: float = 0.0):
+    """The per-step LP of a slide plan (``light``: the sliding finger presses lightly)."""
+    G = _g(contacts, theta)
+    return G, Squeeze.build(G, MU, F_MIN, F_MAX, {sliding: drag}, light=(sliding,))
+
+
+@pytest.mark.parametrize(("sliding", "drag", "theta"), [(0, MU, 0.0), (1, -MU, 0.3),
+                                                        (2, 0.0, -0.8), (1, 0.0, 1.2)])
+def test_vertex_solver_finds_the_lp_optimum_of_slide_plans(sliding, drag, theta):
+    """The per-step LP of a slide, solved by vertex enumeration: feasible exactly when HiGHS
+    finds it feasible, at the same optimal cost, inside the cones; where the optimum is a
+    face, the mean of its vertices (strictly inside when the face is an edge)."""
+    from inhand_exp.control.lp import SmallLP, VertexLP
+
+    G, sq = _slide_lp(BEND, sliding, drag, theta)
+    sq.solve(GRAVITY_WRENCH)
+    assert isinstance(sq.lp, VertexLP)
+    m = len(sq.cols)
+    rows = [r for a, b in sq.fric for r in (np.eye(m)[b] - MU * np.eye(m)[a],
+                                             -np.eye(m)[b] - MU * np.eye(m)[a])]
+    lower, upper = np.full(m, -np.inf), np.full(m, np.inf)
+    lower[sq.fn], upper[sq.fn] = F_MIN, F_MAX
+    highs = SmallLP(sq.cost, sq.G, np.array(rows), np.zeros(len(rows)), lower, upper)
+    agree = 0
+    for w in _random_wrenches(150, 3, f_scale=8.0, t_scale=0.4):
+        ref, got = highs.solve(w), sq.solve(w)
+        assert (ref is None) == (got is None)
+        if got is None:
+            continue
+        agree += 1
+        _check_lam(G, got, w)
+        red = got[sq.cols]
+        assert sq.cost @ red == pytest.approx(sq.cost @ ref, abs=1e-8)
+    assert agree >= 50
+
+
+def test_vertex_solver_returns_the_middle_of_an_optimal_edge():
+    """min f1 + f2 with f1 + f2 = 2, 0 <= f1 <= 2: every point is optimal; the middle is
+    returned, not an end where a bound is tight."""
+    from inhand_exp.control.lp import VertexLP
+
+    lp = VertexLP(np.array([1.0, 1.0, 0.0]), np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), None,
+                  None, np.array([0.0, 0.0, -np.inf]), np.array([2.0, 2.0, np.inf]))
+    assert lp.ok
+    np.testing.assert_allclose(lp.solve(np.array([2.0, 0.5])), [1.0, 1.0, 0.5], atol=1e-12)
+    assert lp.solve(np.array([5.0, 0.0])) is None  # f1 + f2 = 5 exceeds the bounds
+    assert not VertexLP.fits(np.ones((1, 4)))  # three dimensions left: HiGHS does those
+
+
+def test_pooled_solvers_answer_as_new_ones():
+    """A HiGHS instance handed on from an LP that is gone starts with no basis."""
+    import gc
+
+    from inhand_exp.control.lp import _POOL, SmallLP
+
+    rng = np.random.default_rng(4)
+    problems = [(rng.uniform(0.5, 1.5, 6), rng.normal(size=(3, 6)), rng.normal(size=(4, 6)))
+                for _ in range(5)]
+    b = np.full(3, 0.3)
+    fresh = []
+    for c, A_eq, A_ub in problems:
+        lp = SmallLP(c, A_eq, A_ub, np.full(4, 5.0), np.zeros(6), np.full(6, 10.0))
+        fresh.append((lp.solve(b), lp.h.getInfo().simplex_iteration_count))
+        del lp
+        gc.collect()
+        assert _POOL  # its solver went back to the pool
+    for (c, A_eq, A_ub), (x, iterations) in zip(problems, fresh, strict=True):
+        lp = SmallLP(c, A_eq, A_ub, np.full(4, 5.0), np.zeros(6), np.full(6, 10.0))
+        y = lp.solve(b)
+        assert (x is None) == (y is None) and lp.h.getInfo().simplex_iteration_count == iterations
+        if x is not None:
+            np.testing.assert_array_equal(x, y)

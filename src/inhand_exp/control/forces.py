@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from inhand_exp.control.lp import SmallLP, linprog
+from inhand_exp.control.lp import SmallLP, VertexLP, linprog
 
 MARGIN = 1e-9  # least slack (N per N of total squeeze) of a strict squeeze
 
@@ -207,9 +207,12 @@ class Squeeze:
                 cost = self.cost
             lower, upper = np.full(m, -np.inf), np.full(m, np.inf)
             lower[self.fn], upper[self.fn] = self.f_min, self.f_max
-            object.__setattr__(self, "lp", SmallLP(cost, self.G, np.array(rows) if rows else None,
-                                                    np.zeros(len(rows)) if rows else None,
-                                                    lower, upper))
+            args = (cost, self.G, np.array(rows) if rows else None,
+                    np.zeros(len(rows)) if rows else None, lower, upper)
+            # normal forces bounded below, friction inside the cones, a cost on the normal
+            # forces: bounded and pointed, so the vertex solver applies where it fits
+            lp = VertexLP(*args) if VertexLP.fits(self.G) else None
+            object.__setattr__(self, "lp", lp if lp is not None and lp.ok else SmallLP(*args))
         return self.lp.solve(w)
 
     def _closed_form(self, w: np.ndarray) -> list[float] | None:

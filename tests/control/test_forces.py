@@ -294,7 +294,7 @@ def test_vertex_solver_returns_the_middle_of_an_optimal_edge():
     assert lp.ok
     np.testing.assert_allclose(lp.solve(np.array([2.0, 0.5])), [1.0, 1.0, 0.5], atol=1e-12)
     assert lp.solve(np.array([5.0, 0.0])) is None  # f1 + f2 = 5 exceeds the bounds
-    assert not VertexLP.fits(np.ones((1, 4)))  # three dimensions left: HiGHS does those
+    assert not VertexLP.fits(np.ones((1, 5)))  # four dimensions left: HiGHS does those
 
 
 def test_pooled_solvers_answer_as_new_ones():
@@ -320,3 +320,46 @@ def test_pooled_solvers_answer_as_new_ones():
         assert (x is None) == (y is None) and lp.h.getInfo().simplex_iteration_count == iterations
         if x is not None:
             np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_pointed_one_off_lps_match_highs(seed, monkeypatch):
+    """The one-off LPs (least squeeze, deepest squeeze, strict span) solved by vertex
+    enumeration give HiGHS's optimal cost and the same feasibility verdicts."""
+    from inhand_exp.control import forces, lp
+    from inhand_exp.control.repose import landing_span, strict_hold
+
+    rng = np.random.default_rng(seed)
+    cases = []
+    for _ in range(40):
+        faces = tuple(rng.choice([L, R], 3))
+        contacts = Contacts(Posture(faces), tuple(rng.uniform(-0.2, 0.2, 3)))
+        G = _g(contacts, float(rng.uniform(-1.2, 1.2)))
+        w = np.array([rng.normal(0, 1.0), rng.uniform(0.5, 3.0), rng.normal(0, 0.05)])
+        cases.append((contacts, G, w))
+
+    def answers():
+        out = []
+        for contacts, G, w in cases:
+            lam = solve_lp(G, w, MU, F_MIN, F_MAX)
+            k = G.shape[1] // 2
+            lam0, margin = forces._deepest_squeeze(G, np.arange(0, 2 * k, 2),
+                                                   np.arange(2 * k).reshape(-1, 2), MU)
+            span = landing_span(MODEL, contacts, 1, contacts.posture.faces[1], GAINS)
+            out.append((None if lam is None else lam[0::2].sum(), margin,
+                        strict_hold(MODEL, contacts, GAINS), span))
+        return out
+
+    vertex = answers()
+    monkeypatch.setattr(lp.VertexLP, "fits", classmethod(lambda cls, A: False))  # HiGHS only
+    highs = answers()
+    for (cost_v, margin_v, hold_v, span_v), (cost_h, margin_h, hold_h, span_h) in zip(
+            vertex, highs, strict=True):
+        assert (cost_v is None) == (cost_h is None)
+        if cost_v is not None:
+            assert cost_v == pytest.approx(cost_h, abs=1e-7)
+        assert margin_v == pytest.approx(margin_h, abs=1e-7) and hold_v == hold_h
+        assert (span_v is None) == (span_h is None)
+        if span_v is not None:
+            np.testing.assert_allclose(span_v, span_h, atol=1e-7)
+    assert any(h[2] for h in highs) and not all(h[2] for h in highs)  # both verdicts seen

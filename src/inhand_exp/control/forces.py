@@ -41,7 +41,8 @@ def solve_lp(G: np.ndarray, w: np.ndarray, mu: float, f_min: float,
     """Contact forces with ``G lam = w`` inside the cones and bounds, least total normal force."""
     k = G.shape[1] // 2
     return linprog(np.tile([1.0, 0.0], k), G, w, _cone_rows(k, mu), np.zeros(2 * k),
-                   np.tile([f_min, -np.inf], k), np.tile([f_max, np.inf], k))
+                   np.tile([f_min, -np.inf], k), np.tile([f_max, np.inf], k),
+                   pointed=f_min >= 0)  # normal forces bounded below, friction in the cones
 
 
 def _deepest_squeeze(Gr: np.ndarray, fn: np.ndarray, fric: np.ndarray, mu: float
@@ -66,8 +67,9 @@ def _deepest_squeeze(Gr: np.ndarray, fn: np.ndarray, fric: np.ndarray, mu: float
     cost[m] = -1.0
     upper = np.full(m + 1, np.inf)
     upper[m] = 1.0
+    # pointed: every force has a row bounding it by s, and s <= 1 bounds the cost -s
     x = linprog(cost, A_eq, np.array([0.0, 0.0, 0.0, 1.0]), np.array(rows),
-                np.zeros(len(rows)), np.full(m + 1, -np.inf), upper)
+                np.zeros(len(rows)), np.full(m + 1, -np.inf), upper, pointed=True)
     return (x[:m], float(x[m])) if x is not None else (np.zeros(m), 0.0)
 
 
@@ -99,7 +101,8 @@ def strict_span(G0: np.ndarray, col: int, k: float, mu: float, bound: float
     lower, upper = np.tile([0.0, -np.inf], m // 2), np.full(m, np.inf)
     ends = []
     for sign in (1.0, -1.0):
-        lam = linprog(sign * coord, A_eq, b_eq, A_ub, b_ub, lower, upper)
+        lam = linprog(sign * coord, A_eq, b_eq, A_ub, b_ub, lower, upper,
+                      pointed=True)  # f_n >= 0, friction in the cones, |coord| <= bound
         if lam is None:
             return None
         ends.append(float(coord @ lam))

@@ -118,7 +118,7 @@ class Squeeze:
     for kinetic friction on a contact that slides.
     """
 
-    pinv: np.ndarray  # (m, 3): minimum-norm particular solution over the free variables
+    pinv: np.ndarray | None  # (m, 3): minimum-norm particular solution (closed form only)
     lam0: np.ndarray  # (m,): internal force with sum f_n = 1, strictly inside the cones
     margin: float  # least slack of lam0 in its constraints (> 0 when usable)
     cols: np.ndarray  # (m,): column of each free variable in the full ``lam`` (2k,)
@@ -162,9 +162,9 @@ class Squeeze:
             cost = np.zeros(m)
             cost[fn] = 1.0
             cost[[pos[2 * i] for i in light]] = 10.0
-        pinv = np.linalg.pinv(Gr)
-        fast = None
-        if margin > MARGIN:
+        pinv, fast = None, None
+        if margin > MARGIN:  # the closed form (a plan without a squeeze solves its LP)
+            pinv = np.linalg.pinv(Gr)
             # constraints g(lam) >= bound, g linear: f_n >= f_min and mu f_n -+ f_t >= 0, so
             # alpha >= (bound - g(lam_p)) / g(lam0) for each; every g(lam0) >= margin > 0
             rows = [(f_min, (1.0, fn_i, 0.0, fn_i), lam0[fn_i]) for fn_i in fn]

@@ -19,3 +19,9 @@ def test_table_sets_ours_beside_the_papers_cells_in_aligned_columns(compose_cfg)
     assert "sampled actions" in sparse[0]
     assert paper_row(compose_cfg("object.name=pole", "perturb=heavier")) is not None
     assert paper_row(compose_cfg("goals=easy", "noise=paper")) is None
+
+
+def test_a_run_without_successes_shows_no_mean_time(compose_cfg):
+    none = {**SUMMARY, "success_rate": 0.0, "avg_time_s": float("nan")}
+    rows = table(none, compose_cfg("learner=ddpg", "goals=easy")).splitlines()
+    assert rows[5].split() == ["avg", "time", "(s)", "-", "1.82"]

@@ -11,6 +11,7 @@ import fcntl
 import hashlib
 import importlib.resources
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -280,6 +281,11 @@ def paper_row(cfg) -> dict[str, str] | None:
     return None
 
 
+def _seconds(value: float) -> str:
+    """A mean time, or '-' when there is none (no successful episode)."""
+    return f"{value:10.2f}" if math.isfinite(value) else f"{'-':>10s}"
+
+
 def table(summary: dict[str, float], cfg) -> str:
     """The evaluation beside the paper's numbers for the same setting."""
     paper = paper_row(cfg)
@@ -303,5 +309,5 @@ def table(summary: dict[str, float], cfg) -> str:
         f"{'success':14s}{summary['success_rate']:10.1%}{cell('success_rate', '10.1%')}",
         f"{'drop':14s}{summary['drop_rate']:10.1%}{cell('drop_rate', '10.1%')}",
         f"{'timeout':14s}{summary['timeout_rate']:10.1%}{'-':>10s}",
-        f"{'avg time (s)':14s}{summary['avg_time_s']:10.2f}{cell('avg_time_s', '10.2f')}",
+        f"{'avg time (s)':14s}{_seconds(summary['avg_time_s'])}{cell('avg_time_s', '10.2f')}",
         *flips])

@@ -85,10 +85,12 @@ class DDPG:
     def train(self, env: EnvBase, total_frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:
         """Collect ``total_frames`` more frames (whole batches) from ``env``, learning as it
-        goes; random torques until the buffer holds ``warmup_frames``."""
+        goes; random torques until the buffer holds ``warmup_frames`` (rounded up to whole
+        batches)."""
         p = self.params
         batches = -(-total_frames // p.frames_per_batch)
-        warm = max(0, p.warmup_frames - self.frames)
+        # random torques in whole batches, as the collector counts them
+        warm = -(-max(0, p.warmup_frames - self.frames) // p.frames_per_batch) * p.frames_per_batch
         collector = Collector(env, self.explore, frames_per_batch=p.frames_per_batch,
                               total_frames=batches * p.frames_per_batch,
                               init_random_frames=warm, auto_register_policy_transforms=False)

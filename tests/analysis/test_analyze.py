@@ -111,3 +111,17 @@ def test_variant_keeps_only_what_changes_the_policy():
     assert variant(["task.reward_progress=0.1", "seed=1",
                     "goals.train_groups=[easy,hard]"]) == (
         "goals.train_groups=[easy,hard] task.reward_progress=0.1")
+
+
+def test_rows_follow_the_papers_order():
+    import pandas as pd
+
+    from inhand_exp.analysis.tables import in_paper_order
+
+    frame = pd.DataFrame({"learner": ["ppo"] * 6,
+                          "perturb": ["thinner", "none", "shorter", "heavier", "none", "odd"],
+                          "noise": ["none", "paper", "none", "none", "none", "none"]})
+    out = in_paper_order(frame, ["learner", "perturb", "noise"])
+    assert list(zip(out.perturb, out.noise, strict=True)) == [
+        ("none", "none"), ("none", "paper"), ("heavier", "none"), ("thinner", "none"),
+        ("shorter", "none"), ("odd", "none")]  # unknown names last

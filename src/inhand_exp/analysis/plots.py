@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from inhand_exp.analysis.tables import per_seed  # noqa: E402
+from inhand_exp.analysis.tables import paper_rank, per_seed  # noqa: E402
 
 
 def learning_curves(iterations: pd.DataFrame, path: Path, smooth: int = 8) -> Path | None:
@@ -55,7 +55,7 @@ def outcome_bars(episodes: pd.DataFrame, by: str, path: Path) -> Path | None:
     stats = seeds.groupby(["learner", by]).agg(
         success=("success_rate", "mean"), success_std=("success_rate", "std"),
         drop=("drop_rate", "mean"), drop_std=("drop_rate", "std")).reset_index()
-    cats = list(dict.fromkeys(stats[by]))
+    cats = list(dict.fromkeys(stats.sort_values(by, key=paper_rank, kind="stable")[by]))
     learners = list(dict.fromkeys(stats["learner"]))
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.5), sharey=True)
     width = 0.8 / max(len(learners), 1)

@@ -12,6 +12,10 @@ import pandas as pd
 TABLES = ("comparison", "robustness", "cube")
 METRICS = ("success_rate", "drop_rate", "timeout_rate", "avg_time_s")
 NEEDS_FLIP = "hard, needs flip"
+PAPER_ORDER = {"group": ("easy", "medium", "hard", NEEDS_FLIP),
+               "perturb": ("none", "heavier", "lighter", "thicker", "thinner", "longer",
+                           "shorter"),
+               "noise": ("none", "paper")}
 
 
 def paper_results() -> pd.DataFrame:
@@ -68,16 +72,25 @@ def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
     if eps.empty:
         return pd.DataFrame()
     out = over_seeds(per_seed(eps, keys), keys)
-    if "group" in out:  # the paper's order, the needs-flip row last
-        order = {g: i for i, g in enumerate(("easy", "medium", "hard", NEEDS_FLIP))}
-        out = out.sort_values(["learner", "variant", "group"],
-                              key=lambda c: c.map(order) if c.name == "group" else c,
-                              kind="stable").reset_index(drop=True)
+    out = in_paper_order(out, [k for k in keys if k in out])
     ref = ref[[*(k for k in keys if k != "variant"), "success_rate", "drop_rate",
                "avg_time_s"]].rename(
         columns={"success_rate": "paper_success", "drop_rate": "paper_drop",
                  "avg_time_s": "paper_time_s"})
     return out.merge(ref, on=[k for k in keys if k != "variant"], how="left")
+
+
+def paper_rank(column: pd.Series) -> pd.Series:
+    """Sort keys putting goal groups, perturbations and noise in the paper's order (the
+    needs-flip row after hard); other columns sort as they are."""
+    order = PAPER_ORDER.get(column.name)
+    if order is None:
+        return column
+    return column.map({v: i for i, v in enumerate(order)}).fillna(len(order))
+
+
+def in_paper_order(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
+    return frame.sort_values(keys, key=paper_rank, kind="stable").reset_index(drop=True)
 
 
 def _cell(mean: float, std: float, pct: bool) -> str:

@@ -203,6 +203,20 @@ def test_a_fixed_start_pose_starts_every_pair_and_an_unholdable_one_is_refused(t
     assert not (tmp_path / "bad").exists()
 
 
+def test_a_goal_file_whose_grasps_do_not_fit_the_perturbed_object_is_refused(tmp_path):
+    res = inhand_exp("mode=goals", "goals=medium", "eval.episodes=16",
+                     f"hydra.run.dir={tmp_path / 'set'}", cwd=tmp_path, fast=False)
+    assert res.returncode == 0, res.stderr
+    first = inhand_exp("mode=train", f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    ev = inhand_exp("mode=eval", f"checkpoint={tmp_path / 'train' / 'policy.pt'}",
+                    f"eval.goals_file={tmp_path / 'set' / 'goals.csv'}", "perturb=longer",
+                    f"hydra.run.dir={tmp_path / 'ev'}", cwd=tmp_path)
+    assert ev.returncode == 2
+    assert "does not fit the simulated object (perturb=longer)" in ev.stderr
+    assert not (tmp_path / "ev").exists()
+
+
 def test_resume_continues_an_interrupted_training_in_its_run_directory(tmp_path):
     run_dir = tmp_path / "run"
     # as if killed after 2 iterations of 8 frames: resume asks for 3

@@ -31,7 +31,16 @@ from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
 from inhand_exp.record.scene import SceneGeometry, SceneReplay
 from inhand_exp.task.actions import action_table
-from inhand_exp.task.goals import GoalPair, goal_set, load_goals, save_goals, start_of
+from inhand_exp.task.goals import (
+    GoalPair,
+    GoalsError,
+    goal_set,
+    load_goals,
+    save_goals,
+    settable,
+    start_of,
+)
+from inhand_exp.task.scene import true_object
 
 CHECKPOINT = "policy.pt"
 PACKAGED = "table2_ppo_seed0.pt"  # in inhand_exp/policies/: what mode=demo shows
@@ -189,13 +198,29 @@ def _train(cfg, learner: Learner, target: int, run_dir: Path, log: RunLog, say) 
 
 def test_goals(cfg) -> list[GoalPair]:
     """The evaluation's goal set: ``eval.goals_file``, or the first ``eval.episodes`` test
-    pairs of the ``goals`` group."""
+    pairs of the ``goals`` group.
+
+    Pairs are drawn on the nominal object. When ``perturb`` changes the simulated object's
+    shape, a pair whose grasp does not fit it at X0 is drawn again (a drawn set) or refused
+    (a goal file), since the episode could not start."""
     model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
+    fits = None
+    if cfg.perturb.width_scale != 1 or cfg.perturb.length_scale != 1:
+        fits = settable(HandModel.from_config(cfg.hand, true_object(cfg.object, cfg.perturb),
+                                              cfg.sim.gravity_mps2))
     if cfg.eval.goals_file:
-        return load_goals(cfg.eval.goals_file, model)
+        goals = load_goals(cfg.eval.goals_file, model)
+        bad = [i for i, pair in enumerate(goals) if fits is not None and not fits(pair)]
+        if bad:
+            raise GoalsError(f"{cfg.eval.goals_file}: the grasp of pair(s) "
+                             f"{', '.join(map(str, bad[:5]))}{' ...' if len(bad) > 5 else ''} "
+                             f"does not fit the simulated object (perturb={cfg.perturb.name}) "
+                             f"at X0, so those episodes cannot start")
+        return goals
     return goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed,
                     workspace=Workspace.from_config(cfg.task),
-                    hard_posture=cfg.goals.hard_goal_posture, start=start_of(model, cfg.goals))
+                    hard_posture=cfg.goals.hard_goal_posture, start=start_of(model, cfg.goals),
+                    fits=fits)
 
 
 def write_goal_set(cfg, run_dir: Path, say) -> Path:

@@ -14,6 +14,7 @@ from inhand_exp.task.goals import (
     load_goals,
     reachable,
     save_goals,
+    settable,
     to_frame,
 )
 
@@ -84,6 +85,23 @@ def test_a_fixed_start_is_shared_by_every_pair_and_holds(model):
         assert len({tuple(p.xg) for p in pairs}) == 6  # the goals still vary
     with pytest.raises(GoalsError, match=r"goals.x0=\[0.0, 0.6, 0.0\]: no grasp"):
         fixed_start(cube, [0.0, 0.6, 0.0], seed=4)
+
+
+def test_a_perturbed_set_starts_on_the_simulated_object_and_keeps_the_pairs_that_fit(model):
+    """A longer pole does not fit every nominal grasp at X0 (its lower end reaches the palm):
+    those pairs are drawn again, the others stay as they were."""
+    from inhand_exp.config import PerturbConfig
+    from inhand_exp.task.scene import true_object
+
+    longer = HandModel.from_config(HandConfig(), true_object(
+        ObjectConfig(), PerturbConfig("longer", length_scale=1.1)), 9.81)
+    fits = settable(longer)
+    nominal = goal_set(model, "medium", 16, seed=1234)
+    perturbed = goal_set(model, "medium", 16, seed=1234, fits=fits)
+    misfits = [i for i, p in enumerate(nominal) if not fits(p)]
+    assert misfits and all(fits(p) for p in perturbed)
+    for i, (a, b) in enumerate(zip(nominal, perturbed, strict=True)):
+        assert np.array_equal(a.xg, b.xg) == (i not in misfits)
 
 
 def test_save_load_round_trip_and_no_overwrite(model, tmp_path):

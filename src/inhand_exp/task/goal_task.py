@@ -22,11 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from inhand_exp.control.hand import GeometryError
-from inhand_exp.task.goals import GoalPair, Start, sample_pair, start_of
+from inhand_exp.task.goals import PRESS_M, GoalPair, Start, sample_pair, start_of
 from inhand_exp.task.rules import reached, reward, to_go
 from inhand_exp.task.scene import Scene
-
-PRESS_M = 0.0005  # initial fingertip press into the surface (m)
 
 
 @dataclass(frozen=True)

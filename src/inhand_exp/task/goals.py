@@ -92,6 +92,22 @@ def _inside(ws: Workspace, pose: np.ndarray) -> bool:
 
 
 Start = tuple[np.ndarray, Contacts]
+PRESS_M = 0.0005  # initial fingertip press into the surface (m)
+
+
+def settable(true_model: HandModel):
+    """A test of pairs: the fingers can be put on the *simulated* object at X0 with the pair's
+    grasp (``true_model``: the hand and the perturbed object; pairs are drawn on the nominal
+    one, and a thicker, thinner or longer pole may not fit the same contacts)."""
+
+    def fits(pair: GoalPair) -> bool:
+        try:
+            true_model.grasp_q(pair.contacts, pair.x0, PRESS_M)
+        except GeometryError:
+            return False
+        return True
+
+    return fits
 
 
 def fixed_start(model: HandModel, pose, seed: int) -> Start:
@@ -119,9 +135,10 @@ def start_of(model: HandModel, goals) -> Start | None:
 def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
                 workspace: Workspace | None = None, hard_posture: str = "other",
                 tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500,
-                start: Start | None = None) -> GoalPair:
+                start: Start | None = None, fits=None) -> GoalPair:
     """One pair of ``group``, by rejection sampling; from ``start`` (a pose and its grasp)
-    when given, else from a random grasp of the workspace."""
+    when given, else from a random grasp of the workspace; only pairs that ``fits`` accepts
+    (e.g. ``settable``), when given."""
     if group not in GROUPS:
         raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
     if hard_posture not in HARD_POSTURES:
@@ -142,20 +159,22 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
             ok = True
         if ok and _apart(x0, xg, tol):
             flip = group == "hard" and needs_flip(model, c0.posture, xg, tol)
-            return GoalPair(group, x0, xg, c0, flip)
+            pair = GoalPair(group, x0, xg, c0, flip)
+            if fits is None or fits(pair):
+                return pair
     raise GeometryError(f"no {group} goal pair found in {max_tries} tries")
 
 
 def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test",
              workspace: Workspace | None = None, hard_posture: str = "other",
-             start: Start | None = None) -> list[GoalPair]:
-    """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i) and
-    ``start``."""
+             start: Start | None = None, fits=None) -> list[GoalPair]:
+    """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i), ``start``
+    and, where it rejects the first draw, ``fits``."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     g, s = GROUPS.index(group), SPLITS.index(split)
     return [sample_pair(model, group, np.random.default_rng([seed, g, s, i]), workspace,
-                        hard_posture, start=start) for i in range(n)]
+                        hard_posture, start=start, fits=fits) for i in range(n)]
 
 
 def to_frame(pairs: list[GoalPair]) -> pd.DataFrame:

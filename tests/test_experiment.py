@@ -19,6 +19,7 @@ def test_table_sets_ours_beside_the_papers_cells_in_aligned_columns(compose_cfg)
     assert "sampled actions" in sparse[0]
     assert paper_row(compose_cfg("object.name=pole", "perturb=heavier")) is not None
     assert paper_row(compose_cfg("goals=easy", "noise=paper")) is None
+    assert paper_row(compose_cfg("object=cube", "goals=hard"))["success_rate"] == "0.714"
 
 
 def test_a_run_without_successes_shows_no_mean_time(compose_cfg):

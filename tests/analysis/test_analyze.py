@@ -125,3 +125,22 @@ def test_rows_follow_the_papers_order():
     assert list(zip(out.perturb, out.noise, strict=True)) == [
         ("none", "none"), ("none", "paper"), ("heavier", "none"), ("thinner", "none"),
         ("shorter", "none"), ("odd", "none")]  # unknown names last
+
+
+def test_a_job_run_again_after_an_interruption_counts_its_episodes_once(tmp_path, compose_cfg):
+    import os
+
+    job = tmp_path / "job"
+    write_run(compose_cfg, job, 0, {"medium": 1}, n=3)  # the attempt that was cut
+    first = job / "run.mcap"
+    first.rename(job / "run-interrupted.mcap")
+    os.utime(job / "run-interrupted.mcap", (1, 1))  # older
+    write_run(compose_cfg, tmp_path / "again", 0, {"medium": 5}, n=6)
+    (tmp_path / "again" / "run.mcap").rename(job / "run.mcap")
+    warnings = []
+    frames = load([tmp_path], warn=warnings.append)
+    eps = frames.episodes
+    assert len(eps) == 6 and eps["success"].sum() == 5  # the rerun's six, not 3 + 6
+    assert (eps["log"] == str(job / "run.mcap")).all()
+    assert len(frames.iterations) == 3  # iterations 1-3 once
+    assert any("3 rows of an earlier, interrupted attempt" in w for w in warnings)

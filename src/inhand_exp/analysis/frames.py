@@ -3,7 +3,10 @@
 Every ``*.mcap`` below the given paths is read with ``record.read_log``, complete or truncated
 (a killed run keeps its completed chunks). A file that is not a run log of this project (not
 MCAP, or no ``/run/config``) is skipped with a warning naming it; nothing else stops the
-reading.
+reading. A run directory may hold several logs: a resumed training's legs (``run-2.mcap``...)
+and the attempts of a job that was interrupted and run again (``run-interrupted.mcap``). They
+are read oldest first, and an episode or iteration that a later log of the same directory has
+again counts once, as the later log has it.
 """
 
 from __future__ import annotations
@@ -86,7 +89,8 @@ def _run_row(path: Path, cfg: dict, truncated: bool, corrupt: int) -> dict:
 def load(paths: Iterable[str | Path], warn: Callable[[str], None] = print) -> Frames:
     """The frames of every run log below ``paths``."""
     runs, iterations, episodes, skipped = [], [], [], []
-    for path in find_logs(paths):
+    logs = sorted(find_logs(paths), key=lambda p: (str(p.parent), p.stat().st_mtime, p.name))
+    for path in logs:
         try:
             log = read_log(path)
         except (LogError, OSError) as err:
@@ -105,10 +109,24 @@ def load(paths: Iterable[str | Path], warn: Callable[[str], None] = print) -> Fr
                  f"{'a truncated log' if log.truncated else 'a damaged log'}"
                  f" ({log.corrupt_chunks} damaged chunks left out)")
         runs.append(run)
-        ids = {k: run[k] for k in ("log", *LABELS)}
+        ids = {k: run[k] for k in ("log", "run_dir", *LABELS)}
         for m in log.topic("/train/iteration"):
             flat = {k: v for k, v in m.items() if k != "losses"}
             iterations.append({**ids, **flat, **m.get("losses", {})})
         for m in log.topic("/eval/episode"):
-            episodes.append({**m, "log": run["log"], "variant": run["variant"]})
-    return Frames(pd.DataFrame(runs), pd.DataFrame(iterations), pd.DataFrame(episodes), skipped)
+            episodes.append({**m, "log": run["log"], "run_dir": run["run_dir"],
+                             "variant": run["variant"]})
+    return Frames(pd.DataFrame(runs), _once(pd.DataFrame(iterations), ["iteration"], warn),
+                  _once(pd.DataFrame(episodes), ["group", "episode"], warn), skipped)
+
+
+def _once(frame: pd.DataFrame, keys: list[str], warn: Callable[[str], None]) -> pd.DataFrame:
+    """Rows of one run directory that a later log has again (a job run again after an
+    interruption), counted once: as the later log has them."""
+    if frame.empty or not set(keys) <= set(frame.columns):
+        return frame
+    repeated = frame.duplicated(["run_dir", *keys], keep="last")
+    for run_dir, n in frame[repeated].groupby("run_dir").size().items():
+        warn(f"inhand-analyze: {run_dir}: {n} rows of an earlier, interrupted attempt left out "
+             f"(a later log of the directory has them again)")
+    return frame[~repeated].reset_index(drop=True)

@@ -107,7 +107,8 @@ def test_cli_refuses_paths_without_logs(tmp_path, capsys):
 
 def test_variant_keeps_only_what_changes_the_policy():
     assert variant(["seed=3", "mode=eval", "goals=hard", "eval.episodes=500",
-                    "hydra.run.dir=x", "checkpoint=a/policy.pt"]) == "default"
+                    "hydra.run.dir=x", "checkpoint=a/policy.pt",
+                    "learner.cache_dir=logs/cache"]) == "default"
     assert variant(["task.reward_progress=0.1", "seed=1",
                     "goals.train_groups=[easy,hard]"]) == (
         "goals.train_groups=[easy,hard] task.reward_progress=0.1")

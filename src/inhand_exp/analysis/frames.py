@@ -23,7 +23,8 @@ from inhand_exp.record.reader import LogError, read_log
 LABELS = ("learner", "variant", "object", "perturb", "noise", "seed")
 # overrides that do not change what a policy is (what a run does, where it writes, how long)
 NOT_RECIPE = {"seed", "mode", "checkpoint", "goals", "resume", "learner", "object", "perturb",
-              "noise", "train.frames", "train.workers", "train.backend", "train.num_envs"}
+              "noise", "train.frames", "train.workers", "train.backend", "train.num_envs",
+              "learner.cache_dir"}
 NOT_RECIPE_PREFIXES = ("hydra", "+hydra", "log.", "eval.")
 
 

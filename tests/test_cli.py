@@ -83,6 +83,10 @@ def test_existing_log_is_never_overwritten(tmp_path):
     second = inhand_exp(f"hydra.run.dir={run_dir}", cwd=tmp_path)
     assert second.returncode == 0 and "finished earlier" in second.stdout  # skipped
     assert (run_dir / "run.mcap").read_bytes() == before
+    other = inhand_exp(f"hydra.run.dir={run_dir}", "eval.episodes=3", cwd=tmp_path)
+    assert other.returncode == 2  # not skipped as if it were the same job
+    assert f"{run_dir} holds a finished run of other settings" in other.stderr
+    assert (run_dir / "run.mcap").read_bytes() == before
 
 
 JOBLIB = ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
@@ -309,6 +313,13 @@ def test_the_sweep_files_compose(tmp_path):
                              capture_output=True, text=True, timeout=120)
         assert res.returncode == 0, (study, res.stderr)
         assert "store: logs/studies/" in res.stdout and "episodes: 20" in res.stdout
+        # the quick profile writes apart from the full study (the job's name is the study's)
+        res = subprocess.run([*APP, "--config-dir", str(SWEEPS), "--config-name", study,
+                              *extra, "+profile=quick", "--cfg", "all", "--resolve"],
+                             cwd=tmp_path, capture_output=True, text=True, timeout=120)
+        assert res.returncode == 0, (study, res.stderr)
+        assert f"dir: logs/studies/quick/{study}" in res.stdout
+        assert f"store: logs/studies/quick/{study}/policies" in res.stdout
 
 
 @pytest.mark.parametrize("launcher", [[], JOBLIB], ids=["basic", "joblib"])

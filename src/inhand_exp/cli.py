@@ -53,6 +53,11 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
 
     done = run_dir / DONE
     if done.is_file() and not cfg.resume:
+        earlier = _done_overrides(done)
+        if earlier is not None and sorted(earlier) != sorted(overrides):
+            raise ConfigError(f"{run_dir} holds a finished run of other settings "
+                              f"({' '.join(earlier) or 'no overrides'}); give this one another "
+                              f"directory (hydra.run.dir, hydra.sweep.dir) or remove that one")
         print(f"{run_dir}: finished earlier ({done}); skipped")
         return run_dir / cfg.log.file
     job = prepare(cfg, run_dir)  # every input read and checked: a refusal writes nothing
@@ -72,7 +77,8 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
         log.write("/run/config", run_config_message(cfg, run_dir, overrides))
         log.flush()
         summary = run_job(cfg, run_dir, log, job)
-    done.write_text(json.dumps({"log": log_path.name, "summary": summary}, default=float) + "\n")
+    done.write_text(json.dumps({"log": log_path.name, "overrides": list(overrides),
+                                "summary": summary}, default=float) + "\n")
     if str(cfg.mode) == "demo" and cfg.log.sim_state_hz > 0:
         from inhand_exp.analysis.render import RenderError, render
 
@@ -121,6 +127,15 @@ def resume_argv(argv: list[str]) -> list[str]:
 
 
 DONE = "done.json"  # written when a run finishes: a sweep run again skips it
+
+
+def _done_overrides(done: Path) -> list[str] | None:
+    """The overrides a finished run recorded in its ``done.json`` (None: not recorded)."""
+    try:
+        recorded = json.loads(done.read_text()).get("overrides")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return [str(o) for o in recorded] if isinstance(recorded, list) else None
 FAILED = "failed.txt"  # written when a job of a sweep fails, with its error
 REFUSED = 2  # the exit code of every refused input (bad config value, file, checkpoint)
 _started = False  # the job function was entered: Hydra composed the config

@@ -319,7 +319,6 @@ def test_the_sweep_files_compose(tmp_path):
                              cwd=tmp_path, capture_output=True, text=True, timeout=120)
         assert res.returncode == 0, (study, res.stderr)
         assert f"dir: logs/studies/quick/{study}" in res.stdout
-        assert f"store: logs/studies/quick/{study}/policies" in res.stdout
 
 
 @pytest.mark.parametrize("launcher", [[], JOBLIB], ids=["basic", "joblib"])

@@ -210,7 +210,7 @@ def test_goals(cfg) -> list[GoalPair]:
                                               cfg.sim.gravity_mps2))
     if cfg.eval.goals_file:
         goals = load_goals(cfg.eval.goals_file, model)
-        bad = [i for i, pair in enumerate(goals) if fits is not None and not fits(pair)]
+        bad = [i for i, pair in enumerate(goals) if not fits(pair)] if fits else []
         if bad:
             raise GoalsError(f"{cfg.eval.goals_file}: the grasp of pair(s) "
                              f"{', '.join(map(str, bad[:5]))}{' ...' if len(bad) > 5 else ''} "

@@ -150,6 +150,12 @@ class GoalsConfig:
                                   "posture than the start's (other, as the authors' code drew "
                                   "them; arbitrary pairs need a flip too rarely) or any pose "
                                   "the hand holds (any).", choices=("other", "any"))
+    reachable_only: bool = spec(True, "Keep only hard pairs whose goal the action set can "
+                                "reach: flips lead to a posture that holds it. With the "
+                                "paper's flips (left and right finger) the middle finger never "
+                                "changes side, and 17 % of the 'other' hard pairs have goals "
+                                "only postures with it on the other side hold; false keeps "
+                                "them.")
     x0: list[float] | None = spec(None, "A fixed initial pose [x (m), z (m), theta (rad)] "
                                   "for every pair, training and test, held by one grasp drawn "
                                   "once from goals.seed (the paper's cube study); null: each "

@@ -36,6 +36,7 @@ from inhand_exp.task.goals import (
     GoalsError,
     goal_set,
     load_goals,
+    reach_fingers,
     save_goals,
     settable,
     start_of,
@@ -220,7 +221,7 @@ def test_goals(cfg) -> list[GoalPair]:
     return goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed,
                     workspace=Workspace.from_config(cfg.task),
                     hard_posture=cfg.goals.hard_goal_posture, start=start_of(model, cfg.goals),
-                    fits=fits)
+                    fits=fits, fingers=reach_fingers(model, cfg))
 
 
 def write_goal_set(cfg, run_dir: Path, say) -> Path:

@@ -7,10 +7,15 @@ import pytest
 
 from inhand_exp.config import HandConfig, ObjectConfig
 from inhand_exp.control.hand import HandModel
+from inhand_exp.control.sample import postures as postures_of
 from inhand_exp.task.goals import (
+    FLIP_FINGERS,
     GoalsError,
     fixed_start,
+    flip_distances,
+    flips_to,
     goal_set,
+    holds_near,
     load_goals,
     reachable,
     save_goals,
@@ -67,6 +72,45 @@ def test_hard_sets_need_flips_and_easy_and_medium_sets_never(model):
             assert grasp_of(model, p.contacts.posture, p.xg + np.array(d)) is None
     for group in ("easy", "medium"):
         assert not any(p.needs_flip for p in goal_set(model, group, 12, seed=11))
+
+
+def test_flips_of_the_left_and_right_fingers_split_the_postures_into_two_families(model):
+    """Table I's flips never move the middle finger: from any posture, flips lead to the three
+    postures with the middle finger on the same side, within two flips; all three fingers'
+    flips join all six."""
+    from inhand_exp.control.grasp import Face, Posture
+
+    def changed(a: Posture, b: Posture) -> int:
+        return sum(x != y for x, y in zip(a.faces, b.faces, strict=True))
+
+    six = postures_of(model)
+    for p in six:
+        family = flip_distances(p, FLIP_FINGERS)
+        assert set(family) == {q for q in six if q.faces[1] == p.faces[1]}
+        assert sorted(family.values()) in ([0, 1, 1], [0, 1, 2])  # a chain of three
+        for q, n in family.items():  # each flip moves one finger
+            assert n == 0 or any(changed(q, r) == 1 for r, m in family.items() if m == n - 1)
+        assert set(flip_distances(p, (0, 1, 2))) == set(six)
+        assert flip_distances(p, ()) == {p: 0}
+    L, R = Face.LEFT, Face.RIGHT
+    assert flip_distances(Posture((L, R, R)), FLIP_FINGERS) == {
+        Posture((L, R, R)): 0, Posture((L, R, L)): 1, Posture((R, R, L)): 2}
+
+
+def test_hard_pairs_are_kept_only_when_the_flips_reach_the_goal(model):
+    """The default hard set leaves out pairs whose goal only the other posture family holds;
+    ``fingers=None`` keeps them. The pairs the check keeps are the very same draws."""
+    kept = goal_set(model, "hard", 24, seed=11)
+    every = goal_set(model, "hard", 24, seed=11, fingers=None)
+    for p in kept:
+        assert flips_to(model, p.contacts.posture, p.xg, FLIP_FINGERS) is not None
+    out = [p for p in every if flips_to(model, p.contacts.posture, p.xg, FLIP_FINGERS) is None]
+    assert out and all(p.needs_flip for p in out)
+    for p in out:  # a grasp with the middle finger on its other side holds the goal
+        assert any(holds_near(model, q, p.xg) for q in postures_of(model)
+                   if q.faces[1] != p.contacts.posture.faces[1])
+    same = sum(np.array_equal(a.xg, b.xg) for a, b in zip(kept, every, strict=True))
+    assert same == len(every) - len(out)
 
 
 def test_a_fixed_start_is_shared_by_every_pair_and_holds(model):

@@ -22,7 +22,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from inhand_exp.control.hand import GeometryError
-from inhand_exp.task.goals import PRESS_M, GoalPair, Start, sample_pair, start_of
+from inhand_exp.task.goals import (
+    FLIP_FINGERS,
+    PRESS_M,
+    GoalPair,
+    Start,
+    reach_fingers,
+    sample_pair,
+    start_of,
+)
 from inhand_exp.task.rules import reached, reward, to_go
 from inhand_exp.task.scene import Scene
 
@@ -48,16 +56,18 @@ class GoalTask:
     ``pool`` > 0: keep the first ``pool`` training pairs drawn and, once there are that many,
     draw episodes from them uniformly (drawing a pair takes about 0.2 s, far longer than an
     end-to-end episode that drops the object at once). ``start``: the pose and grasp every
-    training pair starts from (``goals.x0``), or None.
+    training pair starts from (``goals.x0``), or None. ``fingers``: see ``goals.sample_pair``
+    (None: no pair is left out).
     """
 
     def __init__(self, scene: Scene, groups: tuple[str, ...] = ("medium",),
                  hard_posture: str = "other", goals: list[GoalPair] | None = None,
                  once: bool = False, max_actions: int | None = None,
                  time_limit_s: float | None = None, pool: int = 0,
-                 start: Start | None = None):
+                 start: Start | None = None,
+                 fingers: tuple[int, ...] | None = FLIP_FINGERS):
         self.scene, self.rules = scene, scene.rules
-        self.start = start
+        self.start, self.fingers = start, fingers
         self.groups, self.hard_posture = tuple(groups), hard_posture
         self.goals, self.once = goals, once and goals is not None
         self.max_actions, self.time_limit_s = max_actions, time_limit_s
@@ -78,7 +88,7 @@ class GoalTask:
         return cls(scene, tuple(goals["train_groups"]) or (goals["name"],),
                    goals["hard_goal_posture"], **limit,
                    start=start_of(scene.model, goals) if kwargs.get("goals") is None else None,
-                   **kwargs)
+                   fingers=reach_fingers(scene.model, cfg), **kwargs)
 
     @property
     def exhausted(self) -> bool:
@@ -94,7 +104,8 @@ class GoalTask:
             else self.groups[0]
         s = self.scene
         return sample_pair(s.model, group, rng, s.workspace, self.hard_posture,
-                           (s.rules.success_tol_m, s.rules.success_tol_rad), start=self.start)
+                           (s.rules.success_tol_m, s.rules.success_tol_rad), start=self.start,
+                           fingers=self.fingers)
 
     def reset(self, rng: np.random.Generator) -> bool:
         """Start the next episode: the object at X0, the fingers on its simulated surface, at

@@ -8,8 +8,7 @@ X0 is a pose of the workspace with a random grasp that holds it. Then:
   other contact coordinates, so sliding may be needed;
 - hard: Xg is a pose of the workspace held by a grasp of another posture than X0's
   (``hard_goal_posture="other"``, the default, as the authors' own code drew its hard goals);
-  with ``any``, any pose some grasp holds (arbitrary pairs: about 22 % of them need a flip,
-  against 28 % with ``other``, on the default workspace).
+  with ``any``, any pose some grasp holds.
 
 X0 and Xg are drawn uniformly from the part of the workspace the hand holds
 (``sample.random_grasp``), so poses only one posture holds (large tilts) are as likely as the
@@ -19,7 +18,14 @@ held by one grasp drawn once from the seed (``fixed_start``; the paper's cube st
 Every pair carries ``needs_flip``: no grasp of the initial posture holds the object at Xg, nor
 anywhere within the success tolerance round it, by the controllers' own model
 (``sample.grasp_of``: reach, joint limits, links and palm clear, a squeeze strictly inside the
-friction cones). Pair ``i`` of a split is drawn from its own
+friction cones).
+
+A hard pair is kept only when the action set can reach its goal (``goals.reachable_only``):
+some posture that flips lead to from X0's holds the object at Xg (``flips_to``). The paper's
+action set flips the left and right fingers only (Table I), so the middle finger never changes
+side, and the six postures of a pole form two families of three that no flip joins. Of the
+"other" hard pairs of the default workspace, 17 % have a goal that only the other family
+holds: no policy can solve them. Pair ``i`` of a split is drawn from its own
 generator seeded by (seed, group, split, i), so a set does not depend on how many pairs are
 drawn or in what order, and the test set (split "test") never overlaps the training
 distribution (split "train") by construction of the streams.
@@ -38,7 +44,14 @@ from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import GeometryError, HandModel
 from inhand_exp.control.repose import strict_hold
-from inhand_exp.control.sample import Workspace, grasp_of, holds_at, postures, random_grasp
+from inhand_exp.control.sample import (
+    Workspace,
+    elongated,
+    grasp_of,
+    holds_at,
+    postures,
+    random_grasp,
+)
 
 GROUPS = ("easy", "medium", "hard")
 SPLITS = ("train", "test")
@@ -47,6 +60,7 @@ COLUMNS = ("group", "x0_x", "x0_z", "x0_theta", "xg_x", "xg_z", "xg_theta",
 OPTIONAL = ("needs_flip",)  # computed when a file lacks it
 EASY_STEP = np.array([0.06, 0.06, 0.6])  # largest easy offset (m, m, rad)
 HARD_POSTURES = ("other", "any")
+FLIP_FINGERS = (0, 2)  # the action table's flip left and flip right
 
 
 class GoalsError(ValueError):
@@ -70,15 +84,70 @@ def reachable(model: HandModel, contacts: Contacts, pose: np.ndarray) -> bool:
     return holds_at(model, contacts, pose) is not None
 
 
-def needs_flip(model: HandModel, posture: Posture, xg: np.ndarray,
+def holds_near(model: HandModel, posture: Posture, xg: np.ndarray,
                tol: tuple[float, float] = (0.01, 0.1)) -> bool:
-    """No grasp of ``posture`` holds the object anywhere it would count as at the goal: at
-    ``xg`` nor at any pose of a 3 x 3 x 3 grid spanning 90 % of the success tolerance ``tol``
+    """Some grasp of ``posture`` holds the object where it would count as at the goal: at
+    ``xg`` or at a pose of a 3 x 3 x 3 grid spanning 90 % of the success tolerance ``tol``
     (m, rad) round it (a deterministic search, the goal itself first)."""
     steps = [0.0, -0.9, 0.9]
     grid = sorted(itertools.product(steps, steps, steps), key=lambda d: sum(map(abs, d)))
     scale = np.array([tol[0], tol[0], tol[1]])
-    return all(grasp_of(model, posture, xg + np.array(d) * scale) is None for d in grid)
+    return any(grasp_of(model, posture, xg + np.array(d) * scale) is not None for d in grid)
+
+
+def needs_flip(model: HandModel, posture: Posture, xg: np.ndarray,
+               tol: tuple[float, float] = (0.01, 0.1)) -> bool:
+    """No grasp of ``posture`` holds the object anywhere it would count as at the goal."""
+    return not holds_near(model, posture, xg, tol)
+
+
+def flip_fingers(model: HandModel, prim) -> tuple[int, ...] | None:
+    """The fingers whose flips change a pole's posture in the action set of ``prim``: flip left
+    and flip right (fingers 0 and 2, paper Table I), or none without flips. None for other
+    shapes, whose release and land may put a finger on any face (not modelled here)."""
+    if not elongated(model):
+        return None
+    return FLIP_FINGERS if prim.flip else ()
+
+
+def reach_fingers(model: HandModel, cfg) -> tuple[int, ...] | None:
+    """The ``fingers`` argument of ``goal_set`` for a run's config: the action set's flip
+    fingers with ``goals.reachable_only``, else None (no pair is left out)."""
+    return flip_fingers(model, cfg["primitives"]) if cfg["goals"]["reachable_only"] else None
+
+
+def flip_distances(posture: Posture, fingers: tuple[int, ...]) -> dict[Posture, int]:
+    """The postures a sequence of flips of ``fingers`` leads to from ``posture``, with the
+    fewest flips each takes. A flip moves a finger to the opposite long face and needs the two
+    staying fingers on opposite faces (they hold the pole alone meanwhile). With fingers 0 and
+    2 only, the middle finger never changes side: the six postures form two families of three,
+    and no flip joins them."""
+    dist, frontier = {posture: 0}, [posture]
+    while frontier:
+        nxt = []
+        for p in frontier:
+            for k in fingers:
+                a, b = (j for j in range(3) if j != k)
+                if p.faces[a] == p.faces[b]:
+                    continue
+                faces = list(p.faces)
+                faces[k] = Face.RIGHT if faces[k] == Face.LEFT else Face.LEFT
+                q = Posture(tuple(faces))
+                if q not in dist:
+                    dist[q] = dist[p] + 1
+                    nxt.append(q)
+        frontier = nxt
+    return dist
+
+
+def flips_to(model: HandModel, posture: Posture, xg: np.ndarray, fingers: tuple[int, ...],
+             tol: tuple[float, float] = (0.01, 0.1)) -> int | None:
+    """The fewest flips of ``fingers`` after which some grasp holds the object at the goal
+    (``holds_near``), or None when no posture they lead to holds it."""
+    for p, n in sorted(flip_distances(posture, fingers).items(), key=lambda t: t[1]):
+        if holds_near(model, p, xg, tol):
+            return n
+    return None
 
 
 def _apart(x0: np.ndarray, xg: np.ndarray, tol: tuple[float, float]) -> bool:
@@ -135,10 +204,13 @@ def start_of(model: HandModel, goals) -> Start | None:
 def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
                 workspace: Workspace | None = None, hard_posture: str = "other",
                 tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500,
-                start: Start | None = None, fits=None) -> GoalPair:
+                start: Start | None = None, fits=None,
+                fingers: tuple[int, ...] | None = FLIP_FINGERS) -> GoalPair:
     """One pair of ``group``, by rejection sampling; from ``start`` (a pose and its grasp)
     when given, else from a random grasp of the workspace; only pairs that ``fits`` accepts
-    (e.g. ``settable``), when given."""
+    (e.g. ``settable``), when given. With ``fingers`` (``flip_fingers``) and a pole, a hard
+    pair is kept only when flips of those fingers lead to a posture that holds the object at
+    the goal: no sequence of the action set reaches the others."""
     if group not in GROUPS:
         raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
     if hard_posture not in HARD_POSTURES:
@@ -159,6 +231,9 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
             ok = True
         if ok and _apart(x0, xg, tol):
             flip = group == "hard" and needs_flip(model, c0.posture, xg, tol)
+            if flip and fingers is not None and elongated(model) and \
+                    flips_to(model, c0.posture, xg, fingers, tol) is None:
+                continue
             pair = GoalPair(group, x0, xg, c0, flip)
             if fits is None or fits(pair):
                 return pair
@@ -167,14 +242,16 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
 
 def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test",
              workspace: Workspace | None = None, hard_posture: str = "other",
-             start: Start | None = None, fits=None) -> list[GoalPair]:
+             start: Start | None = None, fits=None,
+             fingers: tuple[int, ...] | None = FLIP_FINGERS) -> list[GoalPair]:
     """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i), ``start``
-    and, where it rejects the first draw, ``fits``."""
+    and, where they reject the first draw, ``fits`` and ``fingers`` (see ``sample_pair``)."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     g, s = GROUPS.index(group), SPLITS.index(split)
     return [sample_pair(model, group, np.random.default_rng([seed, g, s, i]), workspace,
-                        hard_posture, start=start, fits=fits) for i in range(n)]
+                        hard_posture, start=start, fits=fits, fingers=fingers)
+            for i in range(n)]
 
 
 def to_frame(pairs: list[GoalPair]) -> pd.DataFrame:

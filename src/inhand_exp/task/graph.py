@@ -37,9 +37,9 @@ from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import strict_hold
 from inhand_exp.control.sample import Workspace, postures
+from inhand_exp.task.goals import FLIP_FINGERS
 
 SIDES = (Face.LEFT, Face.RIGHT)
-FLIP_FINGERS = (0, 2)  # the action table's flip left and flip right
 
 
 @dataclass(frozen=True)

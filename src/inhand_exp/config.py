@@ -161,8 +161,9 @@ class GoalsConfig:
                                   "once from goals.seed (the paper's cube study); null: each "
                                   "pair draws its own.", length=3)
     train_groups: list[str] = spec([], "Groups the training episodes are drawn from, "
-                                   "uniformly; empty: this group only.",
-                                   choices=("easy", "medium", "hard"))
+                                   "uniformly; empty: this group only. 'flip': hard pairs "
+                                   "that need a flip (about 12 % of the hard ones).",
+                                   choices=("easy", "medium", "hard", "flip"))
 
 
 @dataclass

@@ -9,7 +9,7 @@ import torch
 from scipy import sparse
 
 from inhand_exp.config import ConfigError, HandConfig, ObjectConfig
-from inhand_exp.control.grasp import Contacts
+from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.batched import batched_env
@@ -136,22 +136,57 @@ def test_search_plays_easy_pairs_to_the_goal(compose_cfg, tmp_path):
     assert summary["success_rate"] >= 0.75, summary
 
 
-def test_flip_edges_move_finger_0_or_2_over_an_opposed_pair(compose_cfg, tmp_path):
-    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+def test_flip_edges_move_finger_0_or_2_over_a_pair_that_holds_alone(compose_cfg, tmp_path):
+    """A flip edge leaves its pose and the staying pair's contacts as they are, and the pair
+    holds the object alone there, as the flip's own check (``flip.pair_holds``, on the
+    fingertips the kinematics put there) finds; opposed pairs that cannot hold get no edge."""
+    from inhand_exp.control.execute import Observation
+    from inhand_exp.control.flip import pair_holds
+
+    cfg = compose_cfg(*TINY, f"learner.cache_dir={tmp_path}")
+    search = Search(cfg)
     g = search.ensure_graph()
+    model, lat = search.model, g.lattice
     cells = {int(n): tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0}
     coo = g.matrix.tocoo()
-    flips = 0
+
+    def holds_alone(cell: tuple, f: int) -> bool:
+        pose = np.array([lat.xs[cell[4]], lat.zs[cell[5]], lat.ts[cell[6]]])
+        contacts = Contacts(g.postures[cell[0]], tuple(float(lat.cs[k]) for k in cell[1:4]))
+        q = model.grasp_q(contacts, pose)
+        obs = Observation(q, np.zeros(6), pose, np.zeros(3), 0.0)
+        return not isinstance(pair_holds(model, contacts, f, obs, cfg.primitives), str)
+
+    flipped: set[tuple[tuple, int]] = set()
     for n, m in zip(coo.row, coo.col, strict=True):
         a, b = cells[int(n)], cells[int(m)]
         if a[0] == b[0]:
             assert sum(x != y for x, y in zip(a, b, strict=True)) == 1  # one step of one axis
             continue
-        flips += 1
         assert a[4:] == b[4:]  # the pose does not change
         fa, fb = g.postures[a[0]].faces, g.postures[b[0]].faces
         (f,) = [i for i in range(3) if fa[i] != fb[i]]
         assert f in (0, 2)
         stay = [i for i in range(3) if i != f]
-        assert fa[stay[0]] != fa[stay[1]] and a[1 + stay[0]] == b[1 + stay[0]]
-    assert flips > 0
+        assert fa[stay[0]] != fa[stay[1]] and all(a[1 + j] == b[1 + j] for j in stay)
+        flipped.add((a, f))
+    assert len(flipped) > 20
+    rng = np.random.default_rng(0)
+    some = sorted(flipped)
+    for k in rng.choice(len(some), 20, replace=False):
+        assert holds_alone(*some[k])
+    def lands(cell: tuple, f: int) -> bool:  # some node of the flipped posture to go to
+        faces = list(g.postures[cell[0]].faces)
+        faces[f] = Face.LEFT if faces[f] == Face.RIGHT else Face.RIGHT
+        if Posture(tuple(faces)) not in g.postures:
+            return False
+        index = [g.postures.index(Posture(tuple(faces))), *cell[1:]]
+        index[1 + f] = slice(None)
+        return bool((g.ids[tuple(index)] >= 0).any())
+
+    refused = [(cell, f) for cell in cells.values() for f in (0, 2)
+               if (cell, f) not in flipped and lands(cell, f)
+               and len({g.postures[cell[0]].faces[j] for j in range(3) if j != f}) == 2]
+    assert len(refused) > 20
+    for k in rng.choice(len(refused), 20, replace=False):
+        assert not holds_alone(*refused[k])

@@ -113,6 +113,17 @@ def test_hard_pairs_are_kept_only_when_the_flips_reach_the_goal(model):
     assert same == len(every) - len(out)
 
 
+def test_the_flip_training_group_draws_hard_pairs_that_need_a_flip(model):
+    from inhand_exp.task.goals import sample_pair
+
+    for i in range(3):
+        pair = sample_pair(model, "flip", np.random.default_rng([5, i]))
+        assert pair.group == "hard" and pair.needs_flip
+        assert flips_to(model, pair.contacts.posture, pair.xg, FLIP_FINGERS) > 0
+    with pytest.raises(ValueError, match="goal group must be one of"):
+        goal_set(model, "flip", 2, seed=1)  # a test set is one of the paper's groups
+
+
 def test_a_fixed_start_is_shared_by_every_pair_and_holds(model):
     """``goals.x0`` (the paper's cube study): one start pose and one grasp for every pair."""
     from inhand_exp.control.sample import holds_at

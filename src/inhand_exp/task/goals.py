@@ -54,6 +54,7 @@ from inhand_exp.control.sample import (
 )
 
 GROUPS = ("easy", "medium", "hard")
+TRAIN_GROUPS = (*GROUPS, "flip")  # flip: a hard pair that needs a flip (training only)
 SPLITS = ("train", "test")
 COLUMNS = ("group", "x0_x", "x0_z", "x0_theta", "xg_x", "xg_z", "xg_theta",
            "faces", "c0", "c1", "c2")
@@ -206,13 +207,14 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
                 tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500,
                 start: Start | None = None, fits=None,
                 fingers: tuple[int, ...] | None = FLIP_FINGERS) -> GoalPair:
-    """One pair of ``group``, by rejection sampling; from ``start`` (a pose and its grasp)
+    """One pair of ``group`` (or, for ``flip``, a hard pair that needs a flip: a training
+    group that gives the rare flip-needing pairs a share of their own), by rejection sampling; from ``start`` (a pose and its grasp)
     when given, else from a random grasp of the workspace; only pairs that ``fits`` accepts
     (e.g. ``settable``), when given. With ``fingers`` (``flip_fingers``) and a pole, a hard
     pair is kept only when flips of those fingers lead to a posture that holds the object at
     the goal: no sequence of the action set reaches the others."""
-    if group not in GROUPS:
-        raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
+    if group not in TRAIN_GROUPS:
+        raise ValueError(f"goal group must be one of {TRAIN_GROUPS}, got {group!r}")
     if hard_posture not in HARD_POSTURES:
         raise ValueError(f"hard_posture must be one of {HARD_POSTURES}, got {hard_posture!r}")
     ws = workspace or Workspace()
@@ -230,11 +232,13 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
             xg, _, _ = random_grasp(model, rng, ws, exclude=exclude)
             ok = True
         if ok and _apart(x0, xg, tol):
-            flip = group == "hard" and needs_flip(model, c0.posture, xg, tol)
+            flip = group in ("hard", "flip") and needs_flip(model, c0.posture, xg, tol)
             if flip and fingers is not None and elongated(model) and \
                     flips_to(model, c0.posture, xg, fingers, tol) is None:
                 continue
-            pair = GoalPair(group, x0, xg, c0, flip)
+            if group == "flip" and not flip:
+                continue
+            pair = GoalPair("hard" if group == "flip" else group, x0, xg, c0, flip)
             if fits is None or fits(pair):
                 return pair
     raise GeometryError(f"no {group} goal pair found in {max_tries} tries")
@@ -246,6 +250,8 @@ def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test
              fingers: tuple[int, ...] | None = FLIP_FINGERS) -> list[GoalPair]:
     """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i), ``start``
     and, where they reject the first draw, ``fits`` and ``fingers`` (see ``sample_pair``)."""
+    if group not in GROUPS:
+        raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     g, s = GROUPS.index(group), SPLITS.index(split)

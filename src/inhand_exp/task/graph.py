@@ -14,7 +14,9 @@ Edges join neighbouring nodes by one primitive:
 - slide: one finger's coordinate one cell away, the rest unchanged;
 - flip (finger 0, "flip left", and finger 2, "flip right"): that finger to the other face at any
   coordinate, the pose and the other two contacts unchanged, allowed only when the two staying
-  fingers are on opposite faces (they hold the object alone meanwhile).
+  fingers are on opposite faces and can hold the object alone against gravity at the cell's
+  angle (the force distribution the flip itself needs, ``flip.pair_holds``: two contacts
+  barely more than a pole's width apart along it can, others cannot).
 
 An edge weighs the simulated time of the mid-level actions that carry it out (a 2 cm cell is
 two 1 cm reposes of ``primitives.repose_duration_s``). Every check is per finger and per cell,
@@ -33,7 +35,15 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from inhand_exp.config import PrimitivesConfig
-from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
+from inhand_exp.control.forces import Squeeze
+from inhand_exp.control.grasp import (
+    Contacts,
+    Face,
+    Posture,
+    contact_frames,
+    grasp_matrix,
+    rotation,
+)
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import strict_hold
 from inhand_exp.control.sample import Workspace, postures
@@ -88,6 +98,32 @@ class Lattice:
         i = int(np.argmin(np.abs(self.cs - c)))
         step = self.cs[1] - self.cs[0] if len(self.cs) > 1 else np.inf
         return i if abs(self.cs[i] - c) <= step / 2 + 1e-9 else None
+
+
+def pair_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int,
+               prim: PrimitivesConfig) -> np.ndarray:
+    """``H[k, k', t]``: with ``finger`` lifted, the other two fingers of ``posture`` at
+    coordinates ``cs[k]`` and ``cs[k']`` (in finger order) hold the object still at angle
+    ``ts[t]``: their force distribution balances its weight inside the friction cones, with the
+    normal forces of ``prim``."""
+    K, T = len(lattice.cs), len(lattice.ts)
+    stay = [j for j in range(3) if j != finger]
+    mg = model.shape.mass_kg * model.fingers[0].gravity
+    # the weight's balancing wrench in the object frame at each angle (object_wrench at rest)
+    wrenches = [np.array([math.sin(t) * mg, math.cos(t) * mg, 0.0]) for t in lattice.ts]
+    H = np.zeros((K, K, T), dtype=bool)
+    for k, k2 in itertools.product(range(K), repeat=2):
+        coords = [0.0, 0.0, 0.0]
+        coords[stay[0]], coords[stay[1]] = float(lattice.cs[k]), float(lattice.cs[k2])
+        active = tuple(j != finger for j in range(3))
+        pts, nrm = contact_frames(model.shape, Contacts(posture, tuple(coords), active),
+                                  np.zeros(3))
+        squeeze = Squeeze.build(grasp_matrix(pts[stay], nrm[stay]),
+                                model.mu * prim.friction_margin, prim.min_normal_force_n,
+                                prim.max_normal_force_n)
+        for t, w in enumerate(wrenches):
+            H[k, k2, t] = squeeze.solve(w) is not None
+    return H
 
 
 def finger_table(model: HandModel, lattice: Lattice, margin: float = 0.1) -> np.ndarray:
@@ -217,11 +253,13 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
                 if other not in ps:
                     continue
                 q = ps.index(other)
-                src = np.moveaxis(ids[p], f, 0)  # (K_f, ..., X, Z, T)
+                if p > q:  # undirected: each pair of postures once
+                    continue
+                held = pair_table(model, lat, posture, f, prim)[:, :, None, None, :]
+                src = np.moveaxis(ids[p], f, 0)  # (K_f, K_a, K_b, X, Z, T)
                 dst = np.moveaxis(ids[q], f, 0)
                 for k, k2 in itertools.product(range(K), repeat=2):
-                    if p < q:  # undirected: each pair of postures once
-                        link(src[k], dst[k2], prim.flip_duration_s)
+                    link(np.where(held, src[k], -1), dst[k2], prim.flip_duration_s)
     n = int(valid.sum())
     r, c, w = (np.concatenate(v) if v else np.zeros(0) for v in (rows, cols, weights))
     matrix = sparse.coo_matrix((w, (r, c)), shape=(n, n)).tocsr()

@@ -34,6 +34,46 @@ def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
     np.testing.assert_allclose(d, [4.0, 3.0, 2.0, 0.0, np.inf])
     assert g.edges == 4 and g.nodes == 5
     assert np.isinf(g.distances_to(np.array([0.0, 0.3, 2.0]))).all()  # outside the lattice
+    goal = np.array([0.0, 0.3, 0.3])
+    np.testing.assert_allclose(g.distances_to(goal, {(2, 1)}), [7.0, 8.0, 2.0, 0.0, np.inf])
+    np.testing.assert_allclose(g.distances_to(goal, {(0, 2), (3, 2)}), [np.inf] * 3 + [0, np.inf])
+    np.testing.assert_allclose(g.distances_to(goal), [4.0, 3.0, 2.0, 0.0, np.inf])  # unchanged
+
+
+def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_path):
+    """When the filter refuses the action of the best edge, the walk takes the best edge of
+    the graph without it, and never plans through it again in that episode."""
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    g, policy = search.ensure_graph(), search.policy
+    lat = g.lattice
+    goal = np.array([lat.xs[0], lat.zs[0], lat.ts[0]])
+    d = g.distances_to(goal)
+
+    def value(cell, a, dist):  # the best successor's distance by action ``a``
+        return min((dist[g.ids[t]] for t in policy.successors(cell, a) if g.ids[t] >= 0),
+                   default=np.inf)
+
+    for cell in (tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0 and 0 < d[n] < np.inf):
+        ranked = sorted(policy.actions, key=lambda a, c=cell: value(c, a, d))
+        if value(cell, ranked[1], d) < np.inf:  # a second way on
+            break
+    here, best = int(g.ids[cell]), ranked[0]
+    pose = np.array([lat.xs[cell[4]], lat.zs[cell[5]], lat.ts[cell[6]]])
+    contacts = Contacts(g.postures[cell[0]], tuple(float(lat.cs[k]) for k in cell[1:4]))
+    obs = np.zeros(18)
+    obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
+    mask = np.ones(len(policy.actions), dtype=bool)
+    assert policy.act(0, obs, mask) == best.index
+    policy.walks.clear()
+    mask[best.index] = False
+    chosen = policy.act(0, obs, mask)
+    walk = policy.walks[0]
+    cut = {(here, int(g.ids[t])) for t in policy.successors(cell, best) if g.ids[t] >= 0}
+    assert cut <= walk.cut and chosen != best.index
+    again = g.distances_to(goal, walk.cut)
+    np.testing.assert_array_equal(walk.field, again)
+    assert value(cell, policy.actions[chosen], again) == min(
+        value(cell, a, again) for a in policy.actions if a.index != best.index)
 
 
 def test_resolutions_must_be_positive():

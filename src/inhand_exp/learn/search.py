@@ -11,9 +11,11 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
 - the shortest time to the goal's pose cell from every node (one Dijkstra per goal cell,
   cached);
 - it carries out the best edge out of its current cell: the mid-level action of that edge
-  (a 2 cm cell is two 1 cm reposes), repeated until the observed cell is the edge's end. An
-  action the feasibility filter rejects, or an edge that does not arrive, is replanned from
-  wherever the object is;
+  (a 2 cm cell is two 1 cm reposes), repeated until the observed cell is the edge's end. When
+  the feasibility filter refuses the best edge's action (the cells allow more flips than the
+  continuous state does), or an edge does not arrive, that edge is cut from the episode's
+  graph and the distances are planned again (one Dijkstra, about 10 ms), so the walk does not
+  come back to try it again from a neighbour;
 - at the goal cell, and wherever the graph has no path, it takes the allowed repose that brings
   the object closest to the goal (the cell is up to half a cell from the goal itself).
 """
@@ -172,8 +174,10 @@ class _Walk:
     """One environment's episode: its goal, the edge under way and the edges that failed."""
 
     goal: tuple[float, float, float]
-    edge: tuple | None = None  # (target cell, action index, steps taken, step budget)
-    blocked: set = field(default_factory=set)
+    edge: tuple | None = None  # (source node, target cell, action, steps taken, step budget)
+    blocked: set = field(default_factory=set)  # (target cell, action) failed from off the graph
+    cut: set = field(default_factory=set)  # edges (node pairs) that failed or were refused
+    field: np.ndarray | None = None  # distances to the goal without the cut edges
 
 
 class SearchPolicy:
@@ -270,34 +274,51 @@ class SearchPolicy:
         if walk is None or walk.goal != tuple(np.round(goal, 9)):
             walk = self.walks[i] = _Walk(tuple(np.round(goal, 9)))
         cell = self.cell(self.contacts(q, pose), pose)
+        ids = self.graph.ids
         if walk.edge is not None:
-            target, a, steps, budget = walk.edge
+            source, target, a, steps, budget = walk.edge
             if cell == target:
                 walk.edge = None
             elif steps < budget and mask[a]:
-                walk.edge = (target, a, steps + 1, budget)
+                walk.edge = (source, target, a, steps + 1, budget)
                 return a
-            else:
-                walk.blocked.add((walk.edge[0], a))  # it did not arrive: plan around it
+            else:  # it did not arrive: plan around it
+                self._cut(walk, source, [target], a, goal)
                 walk.edge = None
-        d = self.field_for(goal)
-        ids = self.graph.ids
-        if cell is not None and not (ids[cell] >= 0 and d[ids[cell]] == 0.0):
+        d = walk.field if walk.field is not None else self.field_for(goal)
+        here = int(ids[cell]) if cell is not None else -1
+        while cell is not None and not (here >= 0 and d[here] == 0.0):
             best, choice = math.inf, None
             for a in self.actions:
-                if not mask[a.index]:
-                    continue
                 for t in self.successors(cell, a):
                     n = ids[t]
-                    if n < 0 or (t, a.index) in walk.blocked:
+                    if n < 0 or (t, a.index) in walk.blocked or (here, int(n)) in walk.cut:
                         continue
-                    value = d[n]
-                    if value < best:
-                        best, choice = value, (t, a.index)
-            if choice is not None and math.isfinite(best):
-                walk.edge = (choice[0], choice[1], 1, self.budget[choice[1]])
-                return choice[1]
+                    if d[n] < best:
+                        best, choice = d[n], (t, a)
+            if choice is None or not math.isfinite(best):
+                break
+            t, a = choice
+            if mask[a.index]:
+                walk.edge = (here, t, a.index, 1, self.budget[a.index])
+                return a.index
+            # the filter refuses the best edge here (a flip the graph's cells allow, say):
+            # plan again without this action's edges out of here
+            d = self._cut(walk, here, self.successors(cell, a), a.index, goal)
         return self.closest_repose(pose, goal, mask)
+
+    def _cut(self, walk: _Walk, source: int, targets: list[tuple], action: int,
+             goal: np.ndarray) -> np.ndarray:
+        """Leave the edges from node ``source`` to ``targets`` out of the walk's plan from now
+        on (from off the graph, ``source`` -1: those targets by that action), and return the
+        distances planned again without them."""
+        ids = self.graph.ids
+        if source < 0:
+            walk.blocked.update((t, action) for t in targets)
+            return walk.field if walk.field is not None else self.field_for(goal)
+        walk.cut.update((source, int(ids[t])) for t in targets if ids[t] >= 0)
+        walk.field = self.graph.distances_to(goal, walk.cut)
+        return walk.field
 
     def closest_repose(self, pose: np.ndarray, goal: np.ndarray, mask: np.ndarray) -> int:
         """The allowed action whose pose change brings the object closest to the goal (a

@@ -183,9 +183,11 @@ class PoseGraph:
             return -1
         return int(self.ids[(self.postures.index(contacts.posture), *ks, *cell)])
 
-    def distances_to(self, goal: np.ndarray) -> np.ndarray:
+    def distances_to(self, goal: np.ndarray, cut: set[tuple[int, int]] = frozenset()
+                     ) -> np.ndarray:
         """Shortest time (s) from every node to any node at the goal's pose cell (inf where
-        none is reachable; all inf when the goal cell holds no node)."""
+        none is reachable; all inf when the goal cell holds no node), without the edges
+        ``cut`` (node pairs, either direction)."""
         cell = self.lattice.pose_cell(goal)
         if cell is None:
             return np.full(self.nodes, np.inf)
@@ -193,7 +195,14 @@ class PoseGraph:
         targets = targets[targets >= 0]
         if targets.size == 0:
             return np.full(self.nodes, np.inf)
-        return csgraph.dijkstra(self.matrix, directed=False, indices=targets, min_only=True)
+        matrix = self.matrix
+        if cut:  # an infinite weight: no path goes through the edge
+            matrix = matrix.copy()
+            for a, b in cut:
+                for u, v in ((a, b), (b, a)):
+                    row = slice(matrix.indptr[u], matrix.indptr[u + 1])
+                    matrix.data[row][matrix.indices[row] == v] = np.inf
+        return csgraph.dijkstra(matrix, directed=False, indices=targets, min_only=True)
 
 
 def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,

@@ -76,6 +76,14 @@ def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_pa
         value(cell, a, again) for a in policy.actions if a.index != best.index)
 
 
+def test_the_end_contact_cells_take_the_ends_of_the_face():
+    lat = Lattice(np.zeros(1), np.zeros(1), np.zeros(1), 0.05 * np.arange(-4, 5))
+    assert lat.contact_cell(0.12) == 6 and lat.contact_cell(-0.2249) == 0
+    assert lat.contact_cell(0.226) is None  # more than half a cell past the last
+    assert lat.contact_cell(0.226, reach=0.235) == 8 and lat.contact_cell(-0.235, 0.235) == 0
+    assert lat.contact_cell(0.24, reach=0.235) is None
+
+
 def test_resolutions_must_be_positive():
     model = HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
     for bad in ((0.0, 0.2, 0.05), (0.02, -0.2, 0.05), (0.02, 0.2, 0.0)):

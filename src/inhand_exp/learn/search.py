@@ -226,7 +226,7 @@ class SearchPolicy:
         if contacts.posture not in g.postures:
             return None
         pc = g.lattice.pose_cell(pose)
-        ks = [g.lattice.contact_cell(c) for c in contacts.coords]
+        ks = [g.lattice.contact_cell(c, self.model.shape.half_z) for c in contacts.coords]
         if pc is None or any(k is None for k in ks):
             return None
         return (g.postures.index(contacts.posture), *ks, *pc)

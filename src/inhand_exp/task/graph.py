@@ -94,10 +94,15 @@ class Lattice:
             out.append(i)
         return tuple(out)
 
-    def contact_cell(self, c: float) -> int | None:
+    def contact_cell(self, c: float, reach: float = 0.0) -> int | None:
+        """The nearest contact cell, or None further than half a cell from the lattice; the
+        end cells also take the ends of the face, up to ``reach`` from its centre (the lattice
+        stops a whole cell short of them when the reach is not a whole number of cells)."""
         i = int(np.argmin(np.abs(self.cs - c)))
         step = self.cs[1] - self.cs[0] if len(self.cs) > 1 else np.inf
-        return i if abs(self.cs[i] - c) <= step / 2 + 1e-9 else None
+        if abs(self.cs[i] - c) <= step / 2 + 1e-9 or abs(c) <= reach:
+            return i
+        return None
 
 
 def pair_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int,

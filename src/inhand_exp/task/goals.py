@@ -210,10 +210,10 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
     """One pair of ``group`` (or, for ``flip``, a hard pair that needs a flip: a training
     group that gives the rare flip-needing pairs a share of their own), by rejection sampling;
     from ``start`` (a pose and its grasp) when given, else from a random grasp of the
-    workspace; only pairs that ``fits`` accepts
-    (e.g. ``settable``), when given. With ``fingers`` (``flip_fingers``) and a pole, a hard
-    pair is kept only when flips of those fingers lead to a posture that holds the object at
-    the goal: no sequence of the action set reaches the others."""
+    workspace; only pairs that ``fits`` accepts (e.g. ``settable``), when given. With
+    ``fingers`` (``flip_fingers``) and a pole, a hard pair is kept only when flips of those
+    fingers lead to a posture that holds the object at the goal: no sequence of the action set
+    reaches the others."""
     if group not in TRAIN_GROUPS:
         raise ValueError(f"goal group must be one of {TRAIN_GROUPS}, got {group!r}")
     if hard_posture not in HARD_POSTURES:

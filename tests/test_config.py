@@ -127,7 +127,7 @@ def test_wrong_type_names_the_key(compose_cfg, override, key):
     ("hand.finger_base_x_m=[0,1]", "hand.finger_base_x_m must have 3 entries, got 2"),
     ("object.mass_kg=nan", "object.mass_kg must be a finite number, got nan"),
     ("goals.train_groups=[easy,hardest]",
-     "goals.train_groups[1] must be one of ['easy', 'medium', 'hard'], got 'hardest'"),
+     "goals.train_groups[1] must be one of ['easy', 'medium', 'hard', 'flip'], got 'hardest'"),
 ])
 def test_impossible_values_name_field_and_value(compose_cfg, override, message):
     cfg = compose_cfg(override)

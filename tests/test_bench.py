@@ -65,6 +65,15 @@ def test_env_reports_its_efficiency_from_the_steps_it_counted(capsys):
     assert ms["filter"] + ms["execute"] < 1e3 * out["wall_s"] * out["workers"] / out["actions"]
 
 
+def test_flips_counts_every_flip_it_checks_once(capsys):
+    main(["flips", "--trials", "6", "--seed", "2"])
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["grasps"] == 6 and 0 < out["checked"] <= 12  # at most two flips per grasp
+    assert sum(out["reasons"].values()) == out["checked"] == sum(out["theta_checked"])
+    assert out["accepted"] == out["reasons"].get("accepted", 0) == sum(out["theta_accepted"])
+    assert all(a <= c for a, c in zip(out["theta_accepted"], out["theta_checked"], strict=True))
+
+
 def test_bad_input_is_refused():
     with pytest.raises(SystemExit, match="2"):
         main(["primitives", "--trials", "0"])

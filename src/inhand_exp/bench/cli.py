@@ -5,6 +5,7 @@
                             [--only hold,repose,...] [overrides...]
     inhand-bench env [--workers W] [--steps N] [--seed S] [overrides...]
     inhand-bench graph [learner.resolution_m=M learner.resolution_rad=R ...]
+    inhand-bench flips [--trials N] [--seed S] [overrides...]
     inhand-bench load [--minutes M] [--workers W] [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
@@ -173,7 +174,8 @@ def speed(args, cfg: DictConfig) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", choices=("speed", "primitives", "env", "graph", "load"))
+    parser.add_argument("what", choices=("speed", "primitives", "env", "graph", "load",
+                                                "flips"))
     parser.add_argument("--minutes", type=float, default=30.0, help="load: how long")
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
@@ -201,6 +203,10 @@ def main(argv: list[str] | None = None) -> None:
         cfg.train.workers = args.workers
         result = load_run(cfg, args.minutes, every_s=max(5.0, args.minutes * 60 / 60),
                           seed=args.seed)
+    elif args.what == "flips":
+        from inhand_exp.bench.flips import flip_conditions
+
+        result = flip_conditions(cfg, args.trials or 300, args.seed)
     elif args.what == "graph":
         from inhand_exp.bench.graph import graph_size
 

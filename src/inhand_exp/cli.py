@@ -127,6 +127,9 @@ def resume_argv(argv: list[str]) -> list[str]:
 
 
 DONE = "done.json"  # written when a run finishes: a sweep run again skips it
+FAILED = "failed.txt"  # written when a job of a sweep fails, with its error
+REFUSED = 2  # the exit code of every refused input (bad config value, file, checkpoint)
+_started = False  # the job function was entered: Hydra composed the config
 
 
 def _done_overrides(done: Path) -> list[str] | None:
@@ -136,9 +139,6 @@ def _done_overrides(done: Path) -> list[str] | None:
     except (OSError, ValueError, AttributeError):
         return None
     return [str(o) for o in recorded] if isinstance(recorded, list) else None
-FAILED = "failed.txt"  # written when a job of a sweep fails, with its error
-REFUSED = 2  # the exit code of every refused input (bad config value, file, checkpoint)
-_started = False  # the job function was entered: Hydra composed the config
 
 
 def check_choices(choices) -> None:

@@ -162,7 +162,7 @@ class GoalsConfig:
                                   "pair draws its own.", length=3)
     train_groups: list[str] = spec([], "Groups the training episodes are drawn from, "
                                    "uniformly; empty: this group only. 'flip': hard pairs "
-                                   "that need a flip (about 12 % of the hard ones).",
+                                   "that need a flip (about 13 % of the hard ones).",
                                    choices=("easy", "medium", "hard", "flip"))
 
 

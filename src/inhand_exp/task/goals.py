@@ -233,10 +233,15 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
             xg, _, _ = random_grasp(model, rng, ws, exclude=exclude)
             ok = True
         if ok and _apart(x0, xg, tol):
-            flip = group in ("hard", "flip") and needs_flip(model, c0.posture, xg, tol)
-            if flip and fingers is not None and elongated(model) and \
-                    flips_to(model, c0.posture, xg, fingers, tol) is None:
-                continue
+            flip = False
+            if group in ("hard", "flip"):
+                if fingers is not None and elongated(model):
+                    n = flips_to(model, c0.posture, xg, fingers, tol)
+                    if n is None:  # no sequence of the action set reaches the goal
+                        continue
+                    flip = n > 0
+                else:
+                    flip = needs_flip(model, c0.posture, xg, tol)
             if group == "flip" and not flip:
                 continue
             pair = GoalPair("hard" if group == "flip" else group, x0, xg, c0, flip)

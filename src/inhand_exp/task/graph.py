@@ -45,7 +45,7 @@ from inhand_exp.control.grasp import (
     rotation,
 )
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.repose import strict_hold
+from inhand_exp.control.repose import object_wrench, strict_hold
 from inhand_exp.control.sample import Workspace, postures
 from inhand_exp.task.goals import FLIP_FINGERS
 
@@ -113,9 +113,11 @@ def pair_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int
     normal forces of ``prim``."""
     K, T = len(lattice.cs), len(lattice.ts)
     stay = [j for j in range(3) if j != finger]
-    mg = model.shape.mass_kg * model.fingers[0].gravity
-    # the weight's balancing wrench in the object frame at each angle (object_wrench at rest)
-    wrenches = [np.array([math.sin(t) * mg, math.cos(t) * mg, 0.0]) for t in lattice.ts]
+    zero = np.zeros(3)
+    wrenches = []  # what the contacts apply to hold the object still, per angle (object frame)
+    for t in lattice.ts:
+        pose = np.array([0.0, 0.0, float(t)])
+        wrenches.append(object_wrench(model, prim, pose, zero, (pose, zero, zero))[1])
     H = np.zeros((K, K, T), dtype=bool)
     for k, k2 in itertools.product(range(K), repeat=2):
         coords = [0.0, 0.0, 0.0]

@@ -177,8 +177,8 @@ def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
     assert not (tmp_path / "set" / "policy.pt").exists()  # no policy involved
     model = HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
     back, made = load_goals(path), goal_set(model, "hard", 6, seed=1234)
-    assert [(p.contacts.posture, p.needs_flip) for p in back] == [
-        (p.contacts.posture, p.needs_flip) for p in made]
+    assert [(p.contacts.posture, p.needs_flip, p.lone_down) for p in back] == [
+        (p.contacts.posture, p.needs_flip, p.lone_down) for p in made]
     for a, b in zip(back, made, strict=True):
         np.testing.assert_allclose(np.r_[a.x0, a.xg, a.contacts.coords],
                                    np.r_[b.x0, b.xg, b.contacts.coords], atol=1e-8)
@@ -191,6 +191,7 @@ def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
     episodes = read_log(tmp_path / "ev" / "run.mcap").topic("/eval/episode")
     assert [e["xg"] for e in episodes] == [list(p.xg) for p in back]
     assert [e["needs_flip"] for e in episodes] == [p.needs_flip for p in back]
+    assert [e["lone_down"] for e in episodes] == [p.lone_down for p in back]
 
 
 def test_a_fixed_start_pose_starts_every_pair_and_an_unholdable_one_is_refused(tmp_path):

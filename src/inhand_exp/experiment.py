@@ -228,9 +228,10 @@ def write_goal_set(cfg, run_dir: Path, say) -> Path:
     """``mode=goals``: the test set alone, to share or to feed another learner."""
     goals = test_goals(cfg)
     path = save_goals(goals, run_dir / "goals.csv")
-    flips = sum(p.needs_flip for p in goals)
+    flips, low = sum(p.needs_flip for p in goals), sum(p.lone_down for p in goals)
     say(f"{len(goals)} {cfg.goals.name} pairs written to {path}; {flips} "
-        f"({flips / len(goals):.1%}) need a flip")
+        f"({flips / len(goals):.1%}) need a flip, {low} ({low / len(goals):.1%}) need the lone "
+        f"finger lower on the pole")
     return path
 
 
@@ -327,11 +328,10 @@ def table(summary: dict[str, float], cfg) -> str:
     how = "sampled" if cfg.eval.sample else "most likely"
     head = f"{cfg.learner.name} {cfg.goals.name} {cfg.object.name} perturb={cfg.perturb.name} " \
            f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions"
-    flips = []
-    if summary.get("needs_flip"):
-        flips = [f"{'needs a flip':14s}{summary['needs_flip_success_rate']:10.1%}{'-':>10s}"
-                 f"   ({summary['needs_flip']} episodes; drops "
-                 f"{summary['needs_flip_drop_rate']:.1%})"]
+    flips = [f"{label:14s}{summary[f'{flag}_success_rate']:10.1%}{'-':>10s}"
+             f"   ({summary[flag]} episodes; drops {summary[f'{flag}_drop_rate']:.1%})"
+             for flag, label in (("needs_flip", "needs a flip"), ("lone_down", "lone down"))
+             if summary.get(flag)]
     return "\n".join([
         head,
         f"{'':14s}{'ours':>10s}{'paper':>10s}",

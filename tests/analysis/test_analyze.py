@@ -20,7 +20,8 @@ def episode(k: int, group: str, success: bool, seed: int, dropped: bool = False)
             "timeout": not (success or dropped), "sim_time_s": 2.0 + k, "n_actions": 3,
             "n_invalid": 0, "x0": [0.0, 0.3, 0.0], "xg": [0.01, 0.3, 0.1],
             "final_pose": [0.0, 0.3, 0.0], "final_err_m": 0.0, "final_err_rad": 0.0,
-            "needs_flip": group == "hard" and k % 2 == 0, "object": "pole", "perturb": "none",
+            "needs_flip": group == "hard" and k % 2 == 0,
+            "lone_down": group == "medium" and k % 3 == 0, "object": "pole", "perturb": "none",
             "noise": "none", "learner": "ppo", "seed": seed}
 
 
@@ -47,8 +48,8 @@ def write_run(compose_cfg, run_dir: Path, seed: int, wins: dict[str, int], n: in
 @pytest.fixture
 def sweep(tmp_path, compose_cfg) -> Path:
     root = tmp_path / "sweep"
-    write_run(compose_cfg, root / "0", 0, {"easy": 8, "hard": 4})
-    write_run(compose_cfg, root / "1", 1, {"easy": 6, "hard": 2})
+    write_run(compose_cfg, root / "0", 0, {"easy": 8, "medium": 5, "hard": 4})
+    write_run(compose_cfg, root / "1", 1, {"easy": 6, "medium": 5, "hard": 2})
     write_run(compose_cfg, root / "2", 0, {"easy": 3}, overrides=("task.reward_progress=0.1",))
     (root / "junk.mcap").write_text("not an mcap file\n")
     with RunLog(root / "empty.mcap"):
@@ -76,6 +77,11 @@ def test_frames_tables_and_skipped_files(sweep):
     assert easy["paper_success"] == pytest.approx(0.954)
     flips = rows[rows["group"] == tables.NEEDS_FLIP].iloc[0]
     assert flips["episodes"] == 10  # the even hard episodes of both seeds
+    lone = rows[rows["group"] == tables.LONE_DOWN].iloc[0]
+    assert lone["episodes"] == 8  # medium episodes 0, 3, 6, 9 of both seeds; 0 and 3 succeed
+    assert lone["success_rate_mean"] == pytest.approx(0.5)
+    assert rows["group"].tolist().index(tables.LONE_DOWN) == \
+        rows["group"].tolist().index("medium") + 1
     shaped = rows[rows["variant"] == "task.reward_progress=0.1"]
     assert shaped["success_rate_mean"].tolist() == [pytest.approx(0.3)]
 

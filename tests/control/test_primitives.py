@@ -201,7 +201,8 @@ def test_slide_moves_only_its_finger(nominal_model, make_world, finger, dc):
 @pytest.mark.parametrize(("finger", "dc", "why"), [
     (2, 0.5, "past the end"),  # -0.15 + 0.5 lies beyond the pole's half length
     (2, 0.08, "cannot hold"),  # the lone right finger outside the left pair: no squeeze
-], ids=["past-end", "no-hold"])
+    (2, -SLIDE_DC, "cannot hold"),  # the lone finger down the pole: see the test below
+], ids=["past-end", "no-hold", "lone-down"])
 def test_slide_infeasible_leaves_world_untouched(nominal_model, make_world, finger, dc, why):
     world = make_world(BEND, X0)
     before = snapshot(world)
@@ -209,6 +210,34 @@ def test_slide_infeasible_leaves_world_untouched(nominal_model, make_world, fing
     assert out.reason == "infeasible" and not out.ok, out
     assert why in out.detail and f"finger {finger}" in out.detail, out.detail
     assert_untouched(world, before, out)
+
+
+def test_the_lone_finger_slides_up_an_upright_pole_but_never_down(nominal_model):
+    """Friction: on a pole within 0.6 rad of upright, the lone finger's normal force alone
+    balances the other two's, so their friction bears at most mu times it, while they must carry
+    the weight plus the sliding finger's drag, mu times it when it slides down. Over random held
+    grasps, no downward slide of the lone finger is accepted; upward ones and the paired
+    fingers' downward ones are, in some grasps."""
+    from inhand_exp.control.execute import Observation
+    from inhand_exp.control.sample import Workspace, random_grasp
+    from inhand_exp.task.goals import lone_finger
+
+    rng = np.random.default_rng(4)
+    upright = Workspace((-0.05, 0.18, -0.6), (0.05, 0.52, 0.6))
+    accepted = {"lone down": 0, "lone up": 0, "pair down": 0}
+    for _ in range(40):
+        pose, contacts, q = random_grasp(nominal_model, rng, upright)
+        lone = lone_finger(contacts.posture)
+        for finger in range(3):
+            for dc in (SLIDE_DC, -SLIDE_DC):
+                if finger != lone and dc > 0:
+                    continue
+                obs = Observation(q, np.zeros(6), pose, np.zeros(3), 0.0, plans={})
+                why = Slide(nominal_model, contacts, finger, dc, SLIDE_S).start(obs)
+                key = f"{'lone' if finger == lone else 'pair'} {'up' if dc > 0 else 'down'}"
+                accepted[key] += why is None
+    assert accepted["lone down"] == 0, accepted
+    assert accepted["lone up"] >= 3 and accepted["pair down"] >= 10, accepted
 
 
 # --- flip -------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from inhand_exp.task.goals import (
     goal_set,
     holds_near,
     load_goals,
+    lone_finger,
     reachable,
     save_goals,
     settable,
@@ -72,6 +73,26 @@ def test_hard_sets_need_flips_and_easy_and_medium_sets_never(model):
             assert grasp_of(model, p.contacts.posture, p.xg + np.array(d)) is None
     for group in ("easy", "medium"):
         assert not any(p.needs_flip for p in goal_set(model, group, 12, seed=11))
+
+
+def test_medium_pairs_whose_lone_finger_must_end_lower_are_flagged(model):
+    """``lone_down``: every grasp of the initial posture that holds the goal has the lone finger
+    lower on the pole than at the start (a slide friction forbids on an upright pole)."""
+    from inhand_exp.control.sample import grasp_of
+
+    medium = goal_set(model, "medium", 16, seed=11)
+    down = [p for p in medium if p.lone_down]
+    assert 1 <= len(down) <= 10, len(down)  # about a quarter of the medium pairs
+    for p in medium:
+        lone = lone_finger(p.contacts.posture)
+        start = p.contacts.coords[lone]
+        held = grasp_of(model, p.contacts.posture, p.xg)
+        if p.lone_down:  # the goal is held, but only lower down
+            assert held is None or held.coords[lone] < start - 0.005
+            assert grasp_of(model, p.contacts.posture, p.xg, lone_min=start - 0.005) is None
+        else:
+            assert holds_near(model, p.contacts.posture, p.xg, lone_min=start - 0.005)
+    assert not any(p.lone_down for p in goal_set(model, "easy", 8, seed=11))
 
 
 def test_flips_of_the_left_and_right_fingers_split_the_postures_into_two_families(model):
@@ -171,6 +192,12 @@ def test_save_load_round_trip_and_no_overwrite(model, tmp_path):
     old = tmp_path / "without_flag.csv"  # a file without the column: the flag is recomputed
     to_frame(pairs).drop(columns=["needs_flip"]).to_csv(old, index=False)
     assert [p.needs_flip for p in load_goals(old, model)] == [p.needs_flip for p in pairs]
+    medium = goal_set(model, "medium", 6, seed=11)
+    path = save_goals(medium, tmp_path / "medium.csv")
+    assert [p.lone_down for p in load_goals(path)] == [p.lone_down for p in medium]
+    to_frame(medium).drop(columns=["lone_down"]).to_csv(old := tmp_path / "no_lone.csv",
+                                                        index=False)
+    assert [p.lone_down for p in load_goals(old, model)] == [p.lone_down for p in medium]
     before = path.read_bytes()
     with pytest.raises(FileExistsError, match="never overwritten"):
         save_goals(pairs, path)

@@ -12,7 +12,8 @@ import pandas as pd
 TABLES = ("comparison", "robustness", "cube")
 METRICS = ("success_rate", "drop_rate", "timeout_rate", "avg_time_s")
 NEEDS_FLIP = "hard, needs flip"
-PAPER_ORDER = {"group": ("easy", "medium", "hard", NEEDS_FLIP),
+LONE_DOWN = "medium, lone down"
+PAPER_ORDER = {"group": ("easy", "medium", LONE_DOWN, "hard", NEEDS_FLIP),
                "perturb": ("none", "heavier", "lighter", "thicker", "thinner", "longer",
                            "shorter"),
                "noise": ("none", "paper")}
@@ -43,9 +44,19 @@ def over_seeds(seeds: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
     return out.reset_index()
 
 
-def _with_flip_row(episodes: pd.DataFrame) -> pd.DataFrame:
-    flips = episodes[(episodes["group"] == "hard") & episodes.get("needs_flip", False)]
-    return pd.concat([episodes, flips.assign(group=NEEDS_FLIP)], ignore_index=True)
+def _flagged(episodes: pd.DataFrame, group: str, flag: str) -> pd.DataFrame:
+    """The episodes of ``group`` whose goal pair carries ``flag`` (False where a log lacks it)."""
+    marked = episodes[flag].eq(True) if flag in episodes else False
+    return episodes[(episodes["group"] == group) & marked]
+
+
+def _with_subset_rows(episodes: pd.DataFrame) -> pd.DataFrame:
+    """The episodes, plus again as rows of their own: the hard pairs that need a flip, and
+    the medium pairs whose lone finger must end lower on the pole (goals.lone_descends)."""
+    return pd.concat([episodes,
+                      _flagged(episodes, "medium", "lone_down").assign(group=LONE_DOWN),
+                      _flagged(episodes, "hard", "needs_flip").assign(group=NEEDS_FLIP)],
+                     ignore_index=True)
 
 
 def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
@@ -56,7 +67,7 @@ def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
         return pd.DataFrame()
     paper = paper_results()
     if table == "comparison":
-        eps = _with_flip_row(episodes[(episodes["object"] == "pole")
+        eps = _with_subset_rows(episodes[(episodes["object"] == "pole")
                                       & (episodes["perturb"] == "none")
                                       & (episodes["noise"] == "none")])
         keys = ["learner", "variant", "group"]
@@ -81,8 +92,8 @@ def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
 
 
 def paper_rank(column: pd.Series) -> pd.Series:
-    """Sort keys putting goal groups, perturbations and noise in the paper's order (the
-    needs-flip row after hard); other columns sort as they are."""
+    """Sort keys putting goal groups, perturbations and noise in the paper's order (each
+    flagged subset after its group); other columns sort as they are."""
     order = PAPER_ORDER.get(column.name)
     if order is None:
         return column

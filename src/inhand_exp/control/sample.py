@@ -79,9 +79,10 @@ def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
 
 def grasp_of(model: HandModel, posture: Posture, pose: np.ndarray,
              rng: np.random.Generator | None = None, tries: int = 60,
-             margin: float = 0.1) -> Contacts | None:
+             margin: float = 0.1, lone_min: float | None = None) -> Contacts | None:
     """Contacts of ``posture`` that hold the object at ``pose`` (``holds_at`` and
-    ``strict_hold``), or None when none is found.
+    ``strict_hold``), or None when none is found; with ``lone_min``, only grasps whose lone
+    finger (a pole's finger alone on its face) is at that coordinate or above.
 
     Each finger's reachable coordinates are found on a 5 mm grid first; then up to ``tries``
     triples of them are checked: random ones with ``rng``; without it (a deterministic
@@ -96,6 +97,10 @@ def grasp_of(model: HandModel, posture: Posture, pose: np.ndarray,
         return None
     faces = posture.faces
     lone = [i for i in range(3) if faces.count(faces[i]) == 1]
+    if lone_min is not None and lone:
+        sets[lone[0]] = [v for v in sets[lone[0]] if v >= lone_min]
+        if not sets[lone[0]]:
+            return None
     gen = rng if rng is not None else np.random.default_rng(0)
     cands: list[tuple[float, float, float]] = []
     if elongated(model) and lone:

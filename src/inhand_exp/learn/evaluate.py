@@ -105,19 +105,22 @@ def _episode(last, pair: GoalPair, episode: int, n_actions: int, n_invalid: int)
             "sim_time_s": float(last["sim_time_s"]), "n_actions": n_actions,
             "n_invalid": n_invalid, "x0": pair.x0.tolist(), "xg": pair.xg.tolist(),
             "final_pose": final.tolist(), "final_err_m": float(np.hypot(ex, ez)),
-            "final_err_rad": float(eth), "needs_flip": bool(pair.needs_flip)}
+            "final_err_rad": float(eth), "needs_flip": bool(pair.needs_flip),
+            "lone_down": bool(pair.lone_down)}
 
 
 def summarise(records: list[Record]) -> dict[str, float]:
     n = len(records)
     wins = [r for r in records if r["success"]]
-    flips = [r for r in records if r.get("needs_flip")]
-    return {"episodes": n,
-            "needs_flip": len(flips),
-            "needs_flip_success_rate": (sum(r["success"] for r in flips) / len(flips)
-                                        if flips else float("nan")),
-            "needs_flip_drop_rate": (sum(r["dropped"] for r in flips) / len(flips)
-                                     if flips else float("nan")),
+    out: dict[str, float] = {"episodes": n}
+    for flag in ("needs_flip", "lone_down"):  # the subsets the goal set flags
+        some = [r for r in records if r.get(flag)]
+        out[flag] = len(some)
+        out[f"{flag}_success_rate"] = (sum(r["success"] for r in some) / len(some)
+                                       if some else float("nan"))
+        out[f"{flag}_drop_rate"] = (sum(r["dropped"] for r in some) / len(some)
+                                    if some else float("nan"))
+    return {**out,
             "success_rate": len(wins) / n,
             "drop_rate": sum(r["dropped"] for r in records) / n,
             "timeout_rate": sum(r["timeout"] for r in records) / n,

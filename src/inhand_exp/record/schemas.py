@@ -152,6 +152,9 @@ EVAL_EPISODE = _topic(
         "final_err_rad": _number("Absolute orientation error between final and goal pose (rad)."),
         "needs_flip": _boolean("True when no grasp of the initial posture holds the object at "
                                "the goal (the goal set's own flag)."),
+        "lone_down": _boolean("True when the initial posture holds the object at the goal only "
+                              "with its lone finger lower on the pole than at the start (the "
+                              "goal set's own flag)."),
         "object": _string("Name of the object config."),
         "perturb": _string("Name of the perturbation config."),
         "noise": _string("Name of the noise config."),

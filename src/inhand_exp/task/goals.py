@@ -20,6 +20,11 @@ anywhere within the success tolerance round it, by the controllers' own model
 (``sample.grasp_of``: reach, joint limits, links and palm clear, a squeeze strictly inside the
 friction cones).
 
+Every medium and hard pair of a pole also carries ``lone_down``: the initial posture holds the
+object at the goal, but only with its lone finger (the one alone on its face) lower on the pole
+than it starts. Sliding it there is what friction forbids while the pole is within about 1 rad
+of upright (``lone_descends``), so such a pair needs a large tilt or a flip on the way.
+
 A hard pair is kept only when the action set can reach its goal (``goals.reachable_only``):
 some posture that flips lead to from X0's holds the object at Xg (``flips_to``). The paper's
 action set flips the left and right fingers only (Table I), so the middle finger never changes
@@ -34,7 +39,7 @@ distribution (split "train") by construction of the streams.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,10 +63,11 @@ TRAIN_GROUPS = (*GROUPS, "flip")  # flip: a hard pair that needs a flip (trainin
 SPLITS = ("train", "test")
 COLUMNS = ("group", "x0_x", "x0_z", "x0_theta", "xg_x", "xg_z", "xg_theta",
            "faces", "c0", "c1", "c2")
-OPTIONAL = ("needs_flip",)  # computed when a file lacks it
+OPTIONAL = ("needs_flip", "lone_down")  # computed when a file lacks them
 EASY_STEP = np.array([0.06, 0.06, 0.6])  # largest easy offset (m, m, rad)
 HARD_POSTURES = ("other", "any")
 FLIP_FINGERS = (0, 2)  # the action table's flip left and flip right
+LONE_SLACK_M = 0.005  # the grid of ``face_coords``: a lone finger "as high" within one step
 
 
 class GoalsError(ValueError):
@@ -71,13 +77,15 @@ class GoalsError(ValueError):
 @dataclass(frozen=True)
 class GoalPair:
     """An initial pose and grasp, and a goal pose (m, m, rad); ``needs_flip``: no grasp of the
-    initial posture holds the object at the goal."""
+    initial posture holds the object at the goal; ``lone_down``: only grasps with the lone
+    finger lower on the pole do (``lone_descends``)."""
 
     group: str
     x0: np.ndarray
     xg: np.ndarray
     contacts: Contacts
     needs_flip: bool = False
+    lone_down: bool = False
 
 
 def reachable(model: HandModel, contacts: Contacts, pose: np.ndarray) -> bool:
@@ -86,14 +94,41 @@ def reachable(model: HandModel, contacts: Contacts, pose: np.ndarray) -> bool:
 
 
 def holds_near(model: HandModel, posture: Posture, xg: np.ndarray,
-               tol: tuple[float, float] = (0.01, 0.1)) -> bool:
+               tol: tuple[float, float] = (0.01, 0.1), lone_min: float | None = None) -> bool:
     """Some grasp of ``posture`` holds the object where it would count as at the goal: at
     ``xg`` or at a pose of a 3 x 3 x 3 grid spanning 90 % of the success tolerance ``tol``
-    (m, rad) round it (a deterministic search, the goal itself first)."""
+    (m, rad) round it (a deterministic search, the goal itself first); with ``lone_min``, a
+    grasp whose lone finger is at that coordinate or above."""
     steps = [0.0, -0.9, 0.9]
     grid = sorted(itertools.product(steps, steps, steps), key=lambda d: sum(map(abs, d)))
     scale = np.array([tol[0], tol[0], tol[1]])
-    return any(grasp_of(model, posture, xg + np.array(d) * scale) is not None for d in grid)
+    return any(grasp_of(model, posture, xg + np.array(d) * scale, lone_min=lone_min)
+               is not None for d in grid)
+
+
+def lone_finger(posture: Posture) -> int:
+    """The finger alone on its face in a pole's posture (two fingers share the other face)."""
+    faces = posture.faces
+    return next(i for i in range(3) if faces.count(faces[i]) == 1)
+
+
+def lone_descends(model: HandModel, contacts: Contacts, xg: np.ndarray,
+                  tol: tuple[float, float] = (0.01, 0.1)) -> bool:
+    """Every grasp of the initial posture that holds a pole near ``xg`` (``holds_near``) has
+    its lone finger lower on the pole than in ``contacts`` (by more than ``LONE_SLACK_M``).
+
+    Sliding the lone finger towards the pole's lower end is what friction forbids on an
+    upright pole: its normal force alone balances the other two fingers' normal forces, so
+    their friction can bear at most mu times its normal force, while they must carry the
+    pole's weight plus the sliding finger's drag, which is exactly that much. Tilted by more
+    than about 1 rad, the normal forces bear part of the weight and the slide can become
+    possible (``Slide.start`` decides). False for other shapes, and when the posture does not
+    hold the goal at all (``needs_flip``)."""
+    if not elongated(model):
+        return False
+    lo = contacts.coords[lone_finger(contacts.posture)] - LONE_SLACK_M
+    return not holds_near(model, contacts.posture, xg, tol, lone_min=lo) and holds_near(
+        model, contacts.posture, xg, tol)
 
 
 def needs_flip(model: HandModel, posture: Posture, xg: np.ndarray,
@@ -261,14 +296,23 @@ def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     g, s = GROUPS.index(group), SPLITS.index(split)
-    return [sample_pair(model, group, np.random.default_rng([seed, g, s, i]), workspace,
-                        hard_posture, start=start, fits=fits, fingers=fingers)
-            for i in range(n)]
+    pairs = [sample_pair(model, group, np.random.default_rng([seed, g, s, i]), workspace,
+                         hard_posture, start=start, fits=fits, fingers=fingers)
+             for i in range(n)]
+    return [with_lone_down(model, p) for p in pairs]
+
+
+def with_lone_down(model: HandModel, pair: GoalPair) -> GoalPair:
+    """``pair`` with its ``lone_down`` flag (``lone_descends``; easy pairs never: their goal
+    is reached by reposing alone)."""
+    down = pair.group != "easy" and not pair.needs_flip and lone_descends(
+        model, pair.contacts, pair.xg)
+    return replace(pair, lone_down=down)
 
 
 def to_frame(pairs: list[GoalPair]) -> pd.DataFrame:
-    rows = [(p.group, *p.x0, *p.xg, str(p.contacts.posture), *p.contacts.coords, p.needs_flip)
-            for p in pairs]
+    rows = [(p.group, *p.x0, *p.xg, str(p.contacts.posture), *p.contacts.coords, p.needs_flip,
+             p.lone_down) for p in pairs]
     return pd.DataFrame(rows, columns=[*COLUMNS, *OPTIONAL])
 
 
@@ -292,8 +336,8 @@ def _flag(v) -> bool | None:
 
 def load_goals(path: str | Path, model: HandModel | None = None) -> list[GoalPair]:
     """Read a goal set, CSV (as ``save_goals`` writes) or Parquet with the same columns; errors
-    name the row and column. ``needs_flip`` is optional; where a file lacks it, it is computed
-    with ``model`` (False without one)."""
+    name the row and column. ``needs_flip`` and ``lone_down`` are optional; where a file lacks
+    them, they are computed with ``model`` (False without one)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"goal file {path} not found")
@@ -332,15 +376,21 @@ def load_goals(path: str | Path, model: HandModel | None = None) -> list[GoalPai
                              f"{sorted(faces_by_name)} joined by '/', got {r.faces!r}")
         posture = Posture(tuple(faces_by_name[n] for n in names))
         xg = np.array(values[3:6])
-        if "needs_flip" in df.columns:
-            flip = _flag(r.needs_flip)
-            if flip is None:
-                raise GoalsError(f"{path} {where} {row}: needs_flip must be true or false, got "
-                                 f"{r.needs_flip!r}")
-        else:
-            flip = model is not None and needs_flip(model, posture, xg)
+        flags = {}
+        for name in OPTIONAL:
+            if name in df.columns:
+                flags[name] = _flag(getattr(r, name))
+                if flags[name] is None:
+                    raise GoalsError(f"{path} {where} {row}: {name} must be true or false, "
+                                     f"got {getattr(r, name)!r}")
+        if "needs_flip" not in flags:
+            flags["needs_flip"] = model is not None and needs_flip(model, posture, xg)
         pair = GoalPair(r.group, np.array(values[0:3]), xg,
-                        Contacts(posture, tuple(values[6:9])), flip)
+                        Contacts(posture, tuple(values[6:9])), flags["needs_flip"])
+        if "lone_down" in flags:
+            pair = replace(pair, lone_down=flags["lone_down"])
+        elif model is not None:
+            pair = with_lone_down(model, pair)
         if model is not None:
             why = unplayable(model, pair)
             if why is not None:

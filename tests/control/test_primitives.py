@@ -219,8 +219,7 @@ def test_the_lone_finger_slides_up_an_upright_pole_but_never_down(nominal_model)
     grasps, no downward slide of the lone finger is accepted; upward ones and the paired
     fingers' downward ones are, in some grasps."""
     from inhand_exp.control.execute import Observation
-    from inhand_exp.control.sample import Workspace, random_grasp
-    from inhand_exp.task.goals import lone_finger
+    from inhand_exp.control.sample import Workspace, lone_finger, random_grasp
 
     rng = np.random.default_rng(4)
     upright = Workspace((-0.05, 0.18, -0.6), (0.05, 0.52, 0.6))

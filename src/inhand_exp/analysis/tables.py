@@ -68,8 +68,8 @@ def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
     paper = paper_results()
     if table == "comparison":
         eps = _with_subset_rows(episodes[(episodes["object"] == "pole")
-                                      & (episodes["perturb"] == "none")
-                                      & (episodes["noise"] == "none")])
+                                         & (episodes["perturb"] == "none")
+                                         & (episodes["noise"] == "none")])
         keys = ["learner", "variant", "group"]
         ref = paper[paper["study"] == "comparison"].rename(columns={"method": "learner"})
     elif table == "robustness":

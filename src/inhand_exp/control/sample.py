@@ -77,6 +77,12 @@ def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
     return out
 
 
+def lone_finger(posture: Posture) -> int:
+    """The finger alone on its face in a pole's posture (two fingers share the other face)."""
+    faces = posture.faces
+    return next(i for i in range(3) if faces.count(faces[i]) == 1)
+
+
 def grasp_of(model: HandModel, posture: Posture, pose: np.ndarray,
              rng: np.random.Generator | None = None, tries: int = 60,
              margin: float = 0.1, lone_min: float | None = None) -> Contacts | None:

@@ -54,6 +54,7 @@ from inhand_exp.control.sample import (
     elongated,
     grasp_of,
     holds_at,
+    lone_finger,
     postures,
     random_grasp,
 )
@@ -104,12 +105,6 @@ def holds_near(model: HandModel, posture: Posture, xg: np.ndarray,
     scale = np.array([tol[0], tol[0], tol[1]])
     return any(grasp_of(model, posture, xg + np.array(d) * scale, lone_min=lone_min)
                is not None for d in grid)
-
-
-def lone_finger(posture: Posture) -> int:
-    """The finger alone on its face in a pole's posture (two fingers share the other face)."""
-    faces = posture.faces
-    return next(i for i in range(3) if faces.count(faces[i]) == 1)
 
 
 def lone_descends(model: HandModel, contacts: Contacts, xg: np.ndarray,

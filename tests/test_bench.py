@@ -74,6 +74,14 @@ def test_flips_counts_every_flip_it_checks_once(capsys):
     assert all(a <= c for a, c in zip(out["theta_accepted"], out["theta_checked"], strict=True))
 
 
+def test_graph_reports_its_size_and_cost(capsys):
+    main(["graph", "task.workspace_x_m=[-0.02,0.02]", "task.workspace_z_m=[0.32,0.36]",
+          "task.workspace_theta_rad=[-0.2,0.2]", "--seed", "1"])
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["nodes"] > 0 and out["edges"] > out["nodes"]
+    assert out["cells"] >= out["nodes"] and out["build_s"] > 0 and out["query_s"] > 0
+
+
 def test_bad_input_is_refused():
     with pytest.raises(SystemExit, match="2"):
         main(["primitives", "--trials", "0"])

@@ -23,21 +23,28 @@ TINY = ("learner=search", "task.workspace_x_m=[-0.02,0.02]", "task.workspace_z_m
 
 
 def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
-    """A hand-built graph over 5 nodes: 0-1 (1 s), 1-2 (1 s), 0-2 (5 s), 2-3 (2 s); 4 alone."""
-    lat = Lattice(np.array([0.0]), np.array([0.3]), np.array([0.0, 0.1, 0.2, 0.3, 0.4]),
-                  np.array([0.0]))
-    ids = np.arange(5, dtype=np.int32).reshape(1, 1, 1, 1, 1, 1, 5)
+    """A hand-built graph over 6 nodes: 0-1 (1 s), 1-2 (1 s), 0-2 (5 s), 2-3 (2 s) both ways;
+    one way only 5->0 (1 s) and 3->4 (1 s)."""
+    lat = Lattice(np.array([0.0]), np.array([0.3]), 0.1 * np.arange(6), np.array([0.0]))
+    ids = np.arange(6, dtype=np.int32).reshape(1, 1, 1, 1, 1, 1, 6)
     r, c, w = [0, 1, 0, 2], [1, 2, 2, 3], [1.0, 1.0, 5.0, 2.0]
-    m = sparse.coo_matrix((w, (r, c)), shape=(5, 5)).tocsr()
-    g = PoseGraph(lat, [None], ids, m.maximum(m.T).tocsr())
-    d = g.distances_to(np.array([0.0, 0.3, 0.3]))  # the goal cell is node 3
-    np.testing.assert_allclose(d, [4.0, 3.0, 2.0, 0.0, np.inf])
-    assert g.edges == 4 and g.nodes == 5
+    r, c, w = r + c + [5, 3], c + r + [0, 4], w + w + [1.0, 1.0]
+    m = sparse.coo_matrix((w, (r, c)), shape=(6, 6)).tocsr()
+    g = PoseGraph(lat, [None], ids, m)
+    goal = np.array([0.0, 0.3, 0.3])  # the goal cell is node 3
+    np.testing.assert_allclose(g.distances_to(goal), [4.0, 3.0, 2.0, 0.0, np.inf, 5.0])
+    assert g.edges == 10 and g.nodes == 6
+    assert g.weight(5, 0) == 1.0 and g.weight(0, 5) == np.inf and g.weight(0, 2) == 5.0
+    # node 4 has no edge out (the goal at 3 is out of its reach); it is reached by 3->4
+    np.testing.assert_allclose(g.distances_to(np.array([0.0, 0.3, 0.4])),
+                               [5.0, 4.0, 3.0, 1.0, 0.0, 6.0])
     assert np.isinf(g.distances_to(np.array([0.0, 0.3, 2.0]))).all()  # outside the lattice
-    goal = np.array([0.0, 0.3, 0.3])
-    np.testing.assert_allclose(g.distances_to(goal, {(2, 1)}), [7.0, 8.0, 2.0, 0.0, np.inf])
-    np.testing.assert_allclose(g.distances_to(goal, {(0, 2), (3, 2)}), [np.inf] * 3 + [0, np.inf])
-    np.testing.assert_allclose(g.distances_to(goal), [4.0, 3.0, 2.0, 0.0, np.inf])  # unchanged
+    # a cut edge is cut one way only
+    np.testing.assert_allclose(g.distances_to(goal, {(1, 2)}), [7.0, 8.0, 2.0, 0.0, np.inf, 8.0])
+    np.testing.assert_allclose(g.distances_to(goal, {(2, 1)}), [4.0, 3.0, 2.0, 0.0, np.inf, 5.0])
+    np.testing.assert_allclose(g.distances_to(goal, {(0, 2), (2, 3)}), [np.inf] * 3 + [0] +
+                               [np.inf] * 2)
+    np.testing.assert_allclose(g.distances_to(goal), [4.0, 3.0, 2.0, 0.0, np.inf, 5.0])
 
 
 def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_path):
@@ -49,9 +56,10 @@ def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_pa
     goal = np.array([lat.xs[0], lat.zs[0], lat.ts[0]])
     d = g.distances_to(goal)
 
-    def value(cell, a, dist):  # the best successor's distance by action ``a``
-        return min((dist[g.ids[t]] for t in policy.successors(cell, a) if g.ids[t] >= 0),
-                   default=np.inf)
+    def value(cell, a, dist):  # the best edge's time to the goal by action ``a``
+        here = int(g.ids[cell])
+        return min((g.weight(here, int(g.ids[t])) + dist[g.ids[t]]
+                    for t in policy.successors(cell, a) if g.ids[t] >= 0), default=np.inf)
 
     for cell in (tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0 and 0 < d[n] < np.inf):
         ranked = sorted(policy.actions, key=lambda a, c=cell: value(c, a, d))
@@ -238,3 +246,58 @@ def test_flip_edges_move_finger_0_or_2_over_a_pair_that_holds_alone(compose_cfg,
     assert len(refused) > 20
     for k in rng.choice(len(refused), 20, replace=False):
         assert not holds_alone(*refused[k])
+
+
+def test_slide_edges_follow_the_slides_own_force_check(compose_cfg):
+    """``slide_table`` gives the verdict of ``Slide.start``'s force check (the other two
+    fingers hold the weight and the sliding finger's drag), over random held grasps of the
+    whole workspace, both ways along the face."""
+    from inhand_exp.config import PrimitivesConfig, TaskConfig, typed
+    from inhand_exp.control.execute import Observation
+    from inhand_exp.control.sample import random_grasp
+    from inhand_exp.control.slide import Slide
+    from inhand_exp.task.graph import slide_table
+
+    cfg = compose_cfg("learner=search", "mode=eval")
+    model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
+    prim = typed(cfg.primitives, PrimitivesConfig)
+    workspace = Workspace.from_config(typed(cfg.task, TaskConfig))
+    rng = np.random.default_rng(7)
+    force = ("cannot hold the object while", "would have to press")
+    verdicts = {True: 0, False: 0}
+    for _ in range(30):
+        pose, contacts, q = random_grasp(model, rng, workspace, press=0.0)
+        lat = Lattice(np.zeros(1), np.zeros(1), np.array([pose[2]]), np.array(contacts.coords))
+        holds = np.zeros((3, 3, 3), dtype=bool)
+        holds[0, 1, 2] = True
+        for finger in range(3):
+            for sign in (1, -1):
+                slides = bool(slide_table(model, lat, contacts.posture, finger, sign, prim,
+                                          holds)[0, 1, 2, 0])
+                obs = Observation(q, np.zeros(6), pose, np.zeros(3), 0.0)
+                why = Slide(model, contacts, finger, sign * 0.02, 0.5, prim).start(obs)
+                if why is None or any(w in why for w in force):
+                    assert slides == (why is None), (pose, contacts, finger, sign, why)
+                    verdicts[slides] += 1
+    assert verdicts[True] >= 20 and verdicts[False] >= 20, verdicts
+
+
+def test_an_upright_poles_lone_finger_has_no_slide_edge_down(compose_cfg, tmp_path):
+    """Within 0.2 rad of upright, slides of the lone finger go up the pole only; the others
+    go both ways."""
+    from inhand_exp.control.sample import lone_finger
+
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    g = search.ensure_graph()
+    cells = {int(n): tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0}
+    coo = g.matrix.tocoo()
+    ways = {(lone, up): 0 for lone in (True, False) for up in (True, False)}
+    for n, m in zip(coo.row, coo.col, strict=True):
+        a, b = cells[int(n)], cells[int(m)]
+        if a[0] != b[0] or a[4:] != b[4:]:
+            continue  # a flip or a repose
+        (f,) = [i for i in range(3) if a[1 + i] != b[1 + i]]
+        lone = f == lone_finger(g.postures[a[0]])
+        ways[lone, bool(b[1 + f] > a[1 + f])] += 1  # the coordinate grows up the pole
+    assert ways[True, False] == 0, ways
+    assert min(ways[True, True], ways[False, True], ways[False, False]) > 0, ways

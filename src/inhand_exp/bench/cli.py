@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_intermixed_args(argv)
     if args.trials is not None and args.trials <= 0:
         parser.error(f"--trials must be > 0, got {args.trials}")
-    learner = ["learner=search"] if args.what == "graph" else []
+    learner = ["learner=search", "mode=eval"] if args.what == "graph" else []
     try:
         cfg = load_config(args.object, [*learner, *args.overrides])
     except (ConfigError, ConfigCompositionException) as err:

@@ -66,6 +66,23 @@ class GraspPlan:
         tips_O = np.array([R.T @ (tips_W[i] - pose[:2]) for i in fingers])
         normals_O = np.array([R.T @ nrm_W[i] for i in fingers])
         levers_O = tips_O + model.tip_radius * normals_O
+        return cls._planned(model, fingers, levers_O, normals_O, tips_O, gains, sliding, drag)
+
+    @classmethod
+    def from_contacts(cls, model: HandModel, contacts, gains: PrimitivesConfig,
+                      sliding: int | None = None, drag: float = 0.0) -> GraspPlan:
+        """The same plan for the commanded contacts (each tip exactly at its coordinate), in
+        the object frame: what a planner without joints can ask of a cell."""
+        pts_O, nrm_O = contact_frames(model.shape, contacts, np.zeros(3))
+        fingers = tuple(i for i in range(3) if contacts.active[i])
+        levers_O, normals_O = pts_O[list(fingers)], nrm_O[list(fingers)]
+        return cls._planned(model, fingers, levers_O, normals_O,
+                            levers_O - model.tip_radius * normals_O, gains, sliding, drag)
+
+    @classmethod
+    def _planned(cls, model: HandModel, fingers: tuple[int, ...], levers_O: np.ndarray,
+                 normals_O: np.ndarray, tips_O: np.ndarray, gains: PrimitivesConfig,
+                 sliding: int | None, drag: float) -> GraspPlan:
         G = grasp_matrix(levers_O, normals_O)
         coupled = {k: drag for k, i in enumerate(fingers) if i == sliding}
         sq = Squeeze.build(G, model.mu * gains.friction_margin, gains.min_normal_force_n,

@@ -17,6 +17,7 @@ from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.grasp import Contacts, face_axes, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
+    GraspPlan,
     at_rest,
     contact_force,
     damped_qdd,
@@ -27,6 +28,36 @@ from inhand_exp.control.repose import (
     push_torque,
     strict_hold,
 )
+
+
+def drag_of(model: HandModel, face, dc: float) -> float:
+    """The sliding finger's tangential force per newton of normal force (kinetic friction,
+    opposing its motion ``dc`` along ``face``), in the contact's tangent convention."""
+    n_O, along_O = face_axes(face)
+    t_O = np.array([-n_O[1], n_O[0]])
+    return model.mu * float(np.sign(dc) * (along_O @ t_O))
+
+
+def slide_forces(plan: GraspPlan, rest: GraspPlan, finger: int, angle: float, model: HandModel,
+                 gains: PrimitivesConfig, max_push_n: float) -> str | None:
+    """Why the other fingers cannot hold the object at rest at ``angle`` while ``finger``
+    slides (``plan``, with its drag) and once it stops (``rest``); None when they can.
+
+    The sliding finger presses as lightly as the plan allows, and no harder than
+    ``max_push_n``: its friction would drag the object. Near upright, the lone finger of a
+    pole cannot slide down at all: the pair on the other face would carry the weight and the
+    drag with friction bounded by the same normal force.
+    """
+    pose = np.array([0.0, 0.0, angle])
+    _, w_O = object_wrench(model, gains, pose, np.zeros(3), (pose, np.zeros(3), np.zeros(3)))
+    lam = plan.squeeze.solve(w_O)
+    if lam is None or rest.squeeze.solve(w_O) is None:
+        return f"the other fingers cannot hold the object while finger {finger} slides"
+    k = plan.fingers.index(finger)
+    if lam[2 * k] > max_push_n:
+        return (f"finger {finger} would have to press with {lam[2 * k]:.2f} N to slide: its "
+                f"friction would drag the object")
+    return None
 
 
 class Slide:
@@ -67,20 +98,14 @@ class Slide:
             return f"finger {i} would end the slide stretched nearly straight"
         if model.finger_gap(i, q_end, obs.pose) < model.clearance:
             return f"finger {i}'s links would cut into the object at the end of the slide"
-        t_O = np.array([-self.n_O[1], self.n_O[0]])
-        drag = model.mu * float(np.sign(self.dc) * (self.along_O @ t_O))
+        drag = drag_of(model, face, self.dc)
         self.plan = plan_for(model, c, obs, self.gains, sliding=i, drag=drag)
         self.rest = plan_for(model, c, obs, self.gains, sliding=i)
         self.hold = plan_for(model, c, obs, self.gains)  # the fallback of a step
-        _, w_O = object_wrench(model, self.gains, obs.pose, np.zeros(3),
-                               (obs.pose, np.zeros(3), np.zeros(3)))
-        lam = self.plan.squeeze.solve(w_O)
-        if lam is None or self.rest.squeeze.solve(w_O) is None:
-            return f"the other fingers cannot hold the object while finger {i} slides"
-        k = self.plan.fingers.index(i)
-        if lam[2 * k] > self.max_push:
-            return (f"finger {i} would have to press with {lam[2 * k]:.2f} N to slide: its "
-                    f"friction would drag the object")
+        refused = slide_forces(self.plan, self.rest, i, obs.pose[2], model, self.gains,
+                               self.max_push)
+        if refused:
+            return refused
         if not strict_hold(model, c.moved(i, coord=self.c1), self.gains):
             return f"the grasp after the slide of finger {i} cannot hold the object"
         self.origin = obs.pose.copy()

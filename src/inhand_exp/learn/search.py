@@ -47,7 +47,7 @@ from inhand_exp.task.actions import Action, action_table
 from inhand_exp.task.graph import SIDES, Lattice, PoseGraph, build_graph
 from inhand_exp.task.rules import to_go
 
-GRAPH_VERSION = 2  # bump when the graph's definition changes: old caches are not reused
+GRAPH_VERSION = 3  # bump when the graph's definition changes: old caches are not reused
 
 
 def from_config(cfg) -> Search:
@@ -291,11 +291,13 @@ class SearchPolicy:
             best, choice = math.inf, None
             for a in self.actions:
                 for t in self.successors(cell, a):
-                    n = ids[t]
-                    if n < 0 or (t, a.index) in walk.blocked or (here, int(n)) in walk.cut:
+                    n = int(ids[t])
+                    if n < 0 or (t, a.index) in walk.blocked or (here, n) in walk.cut:
                         continue
-                    if d[n] < best:
-                        best, choice = d[n], (t, a)
+                    # on the graph, along its edges only (a slide friction forbids is none)
+                    cost = d[n] + self.graph.weight(here, n) if here >= 0 else d[n]
+                    if cost < best:
+                        best, choice = cost, (t, a)
             if choice is None or not math.isfinite(best):
                 break
             t, a = choice

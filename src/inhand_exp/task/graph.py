@@ -11,7 +11,9 @@ it inside the friction cones (``sample.face_coords`` per finger, ``repose.strict
 Edges join neighbouring nodes by one primitive:
 
 - repose: the same contacts, the pose one cell away along x, z or the angle;
-- slide: one finger's coordinate one cell away, the rest unchanged;
+- slide: one finger's coordinate one cell away, the rest unchanged, in the directions the slide's
+  own force check allows at both ends of the edge (``slide_table``; the lone finger of a pole
+  cannot slide down it near upright, for instance);
 - flip (finger 0, "flip left", and finger 2, "flip right"): that finger to the other face at any
   coordinate, the pose and the other two contacts unchanged, allowed only when the two staying
   fingers are on opposite faces and can hold the object alone against gravity at the cell's
@@ -20,12 +22,13 @@ Edges join neighbouring nodes by one primitive:
 
 An edge weighs the simulated time of the mid-level actions that carry it out (a 2 cm cell is
 two 1 cm reposes of ``primitives.repose_duration_s``). Every check is per finger and per cell,
-so the whole lattice is checked as a few numpy tables; the graph is an undirected sparse matrix
+so the whole lattice is checked as a few numpy tables; the graph is a directed sparse matrix
 over the nodes alone.
 """
 
 from __future__ import annotations
 
+import inspect
 import itertools
 import math
 from dataclasses import dataclass
@@ -45,11 +48,13 @@ from inhand_exp.control.grasp import (
     rotation,
 )
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.repose import object_wrench, strict_hold
+from inhand_exp.control.repose import GraspPlan, object_wrench, strict_hold
 from inhand_exp.control.sample import Workspace, postures
+from inhand_exp.control.slide import Slide, drag_of, slide_forces
 from inhand_exp.task.goals import FLIP_FINGERS
 
 SIDES = (Face.LEFT, Face.RIGHT)
+SLIDE_MAX_PUSH_N = inspect.signature(Slide).parameters["max_push_n"].default
 
 
 @dataclass(frozen=True)
@@ -133,6 +138,27 @@ def pair_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int
     return H
 
 
+def slide_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int, sign: int,
+                prim: PrimitivesConfig, holds: np.ndarray,
+                max_push_n: float = SLIDE_MAX_PUSH_N) -> np.ndarray:
+    """``S[k0, k1, k2, t]``: at contacts ``cs[k0], cs[k1], cs[k2]`` of ``posture`` and angle
+    ``ts[t]``, ``finger`` can slide along its face in the direction ``sign`` of its coordinate,
+    by the slide's own force check (``slide.slide_forces``: the other two fingers hold the
+    weight and the sliding finger's kinetic friction). Only the contacts where ``holds`` (a
+    strict grasp) are checked; the rest are False."""
+    K, T = len(lattice.cs), len(lattice.ts)
+    S = np.zeros((K, K, K, T), dtype=bool)
+    drag = drag_of(model, posture.faces[finger], sign)
+    for k in zip(*np.nonzero(holds), strict=True):
+        contacts = Contacts(posture, tuple(float(lattice.cs[j]) for j in k))
+        plan = GraspPlan.from_contacts(model, contacts, prim, sliding=finger, drag=drag)
+        rest = GraspPlan.from_contacts(model, contacts, prim, sliding=finger)
+        for t, angle in enumerate(lattice.ts):
+            S[(*k, t)] = slide_forces(plan, rest, finger, float(angle), model, prim,
+                                      max_push_n) is None
+    return S
+
+
 def finger_table(model: HandModel, lattice: Lattice, margin: float = 0.1) -> np.ndarray:
     """``F[i, s, k, x, z, t]``: finger ``i`` alone touches side ``SIDES[s]`` at coordinate
     ``cs[k]`` with the object at that pose (reach, joint limits with ``margin``, links clear)."""
@@ -159,7 +185,7 @@ def finger_table(model: HandModel, lattice: Lattice, margin: float = 0.1) -> np.
 
 @dataclass
 class PoseGraph:
-    """The nodes (cells the hand holds) and the weighted, undirected edges between them."""
+    """The nodes (cells the hand holds) and the weighted, directed edges between them."""
 
     lattice: Lattice
     postures: list[Posture]
@@ -173,7 +199,9 @@ class PoseGraph:
 
     @property
     def edges(self) -> int:
-        return self.matrix.nnz // 2
+        """Directed edges: a repose or a flip counts once each way, a slide only where friction
+        allows it."""
+        return self.matrix.nnz
 
     @property
     def bytes(self) -> int:
@@ -194,7 +222,7 @@ class PoseGraph:
                      ) -> np.ndarray:
         """Shortest time (s) from every node to any node at the goal's pose cell (inf where
         none is reachable; all inf when the goal cell holds no node), without the edges
-        ``cut`` (node pairs, either direction)."""
+        ``cut`` (node pairs, from the first to the second)."""
         cell = self.lattice.pose_cell(goal)
         if cell is None:
             return np.full(self.nodes, np.inf)
@@ -205,11 +233,19 @@ class PoseGraph:
         matrix = self.matrix
         if cut:  # an infinite weight: no path goes through the edge
             matrix = matrix.copy()
-            for a, b in cut:
-                for u, v in ((a, b), (b, a)):
-                    row = slice(matrix.indptr[u], matrix.indptr[u + 1])
-                    matrix.data[row][matrix.indices[row] == v] = np.inf
-        return csgraph.dijkstra(matrix, directed=False, indices=targets, min_only=True)
+            for u, v in cut:
+                row = slice(matrix.indptr[u], matrix.indptr[u + 1])
+                matrix.data[row][matrix.indices[row] == v] = np.inf
+        # from the targets along the reversed edges: the time from every node to them
+        return csgraph.dijkstra(matrix.T.tocsr(), directed=True, indices=targets,
+                                min_only=True)
+
+    def weight(self, u: int, v: int) -> float:
+        """The time of the edge from node ``u`` to node ``v`` (inf where there is none)."""
+        m = self.matrix
+        row = slice(m.indptr[u], m.indptr[u + 1])
+        hit = np.flatnonzero(m.indices[row] == v)
+        return float(m.data[row][hit[0]]) if hit.size else math.inf
 
 
 def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
@@ -228,9 +264,10 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
         palm[ix, iz, it] = model.palm_gap(np.array([lat.xs[ix], lat.zs[iz], lat.ts[it]])) \
             >= model.clearance
     valid = np.zeros((len(ps), K, K, K, X, Z, T), dtype=bool)
+    squeezes = np.zeros((len(ps), K, K, K), dtype=bool)
     for p, posture in enumerate(ps):
         s = [SIDES.index(f) for f in posture.faces]
-        squeeze = np.zeros((K, K, K), dtype=bool)
+        squeeze = squeezes[p]
         for k in itertools.product(range(K), repeat=3):
             squeeze[k] = strict_hold(model, Contacts(posture, tuple(float(lat.cs[j])
                                                                     for j in k)), prim)
@@ -241,11 +278,12 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
     ids[valid] = np.arange(int(valid.sum()))
     rows, cols, weights = [], [], []
 
-    def link(a: np.ndarray, b: np.ndarray, w: float) -> None:
+    def link(a: np.ndarray, b: np.ndarray, w: float, both: bool = True) -> None:
         ok = (a >= 0) & (b >= 0)
-        rows.append(a[ok])
-        cols.append(b[ok])
-        weights.append(np.full(int(ok.sum()), w))
+        for u, v in ((a, b), (b, a)) if both else ((a, b),):
+            rows.append(u[ok])
+            cols.append(v[ok])
+            weights.append(np.full(int(ok.sum()), w))
 
     repose = [math.ceil(resolution_m / prim.repose_dx_m - 1e-9),
               math.ceil(resolution_m / prim.repose_dz_m - 1e-9),
@@ -253,11 +291,17 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
     for axis, n in zip((4, 5, 6), repose, strict=True):  # x, z, angle
         a = np.moveaxis(ids, axis, 0)
         link(a[:-1], a[1:], n * prim.repose_duration_s)
-    if prim.slide:
+    if prim.slide:  # directed: friction allows some slides only one way
         n = math.ceil(contact_resolution_m / prim.slide_dc_m - 1e-9)
-        for axis in (1, 2, 3):
-            a = np.moveaxis(ids, axis, 0)
-            link(a[:-1], a[1:], n * prim.slide_duration_s)
+        for p, posture in enumerate(ps):
+            for f in range(3):
+                for sign in (1, -1):
+                    S = slide_table(model, lat, posture, f, sign, prim, squeezes[p])
+                    S = np.moveaxis(S, f, 0)[:, :, :, None, None, :]  # (K_f, K, K, 1, 1, T)
+                    a = np.moveaxis(ids[p], f, 0)
+                    src, dst = (a[:-1], a[1:]) if sign > 0 else (a[1:], a[:-1])
+                    go = (S[:-1] & S[1:])  # the force check at both ends of the edge
+                    link(np.where(go, src, -1), dst, n * prim.slide_duration_s, both=False)
     if prim.flip:
         for p, posture in enumerate(ps):
             for f in FLIP_FINGERS:
@@ -269,7 +313,7 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
                 if other not in ps:
                     continue
                 q = ps.index(other)
-                if p > q:  # undirected: each pair of postures once
+                if p > q:  # each pair of postures once: a flip links both ways
                     continue
                 held = pair_table(model, lat, posture, f, prim)[:, :, None, None, :]
                 src = np.moveaxis(ids[p], f, 0)  # (K_f, K_a, K_b, X, Z, T)
@@ -279,5 +323,4 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
     n = int(valid.sum())
     r, c, w = (np.concatenate(v) if v else np.zeros(0) for v in (rows, cols, weights))
     matrix = sparse.coo_matrix((w, (r, c)), shape=(n, n)).tocsr()
-    matrix = matrix.maximum(matrix.T).tocsr()  # symmetric: both directions
     return PoseGraph(lat, ps, ids, matrix, time.perf_counter() - start)

@@ -29,6 +29,8 @@ from inhand_exp.control.repose import (
     strict_hold,
 )
 
+MAX_PUSH_N = 1.5  # the most a sliding finger presses (N): more, and its friction drags the object
+
 
 def drag_of(model: HandModel, face, dc: float) -> float:
     """The sliding finger's tangential force per newton of normal force (kinetic friction,
@@ -66,7 +68,7 @@ class Slide:
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, dc: float,
                  duration_s: float, gains: PrimitivesConfig | None = None, kp: float = 900.0,
                  kd: float = 60.0, move_fraction: float = 0.7,
-                 max_push_n: float = 1.5, min_bend: float = 0.3):
+                 max_push_n: float = MAX_PUSH_N, min_bend: float = 0.3):
         self.model, self.contacts, self.finger, self.dc = model, contacts, finger, dc
         self.duration_s, self.gains = duration_s, gains or PrimitivesConfig()
         self.kp, self.kd = kp, kd

@@ -28,7 +28,6 @@ over the nodes alone.
 
 from __future__ import annotations
 
-import inspect
 import itertools
 import math
 from dataclasses import dataclass
@@ -50,11 +49,10 @@ from inhand_exp.control.grasp import (
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import GraspPlan, object_wrench, strict_hold
 from inhand_exp.control.sample import Workspace, postures
-from inhand_exp.control.slide import Slide, drag_of, slide_forces
+from inhand_exp.control.slide import MAX_PUSH_N, drag_of, slide_forces
 from inhand_exp.task.goals import FLIP_FINGERS
 
 SIDES = (Face.LEFT, Face.RIGHT)
-SLIDE_MAX_PUSH_N = inspect.signature(Slide).parameters["max_push_n"].default
 
 
 @dataclass(frozen=True)
@@ -140,7 +138,7 @@ def pair_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int
 
 def slide_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int, sign: int,
                 prim: PrimitivesConfig, holds: np.ndarray,
-                max_push_n: float = SLIDE_MAX_PUSH_N) -> np.ndarray:
+                max_push_n: float = MAX_PUSH_N) -> np.ndarray:
     """``S[k0, k1, k2, t]``: at contacts ``cs[k0], cs[k1], cs[k2]`` of ``posture`` and angle
     ``ts[t]``, ``finger`` can slide along its face in the direction ``sign`` of its coordinate,
     by the slide's own force check (``slide.slide_forces``: the other two fingers hold the

@@ -9,14 +9,15 @@ SUMMARY = {"episodes": 500, "success_rate": 0.952, "drop_rate": 0.012, "timeout_
 
 
 def test_table_sets_ours_beside_the_papers_cells_in_aligned_columns(compose_cfg):
-    full = table(SUMMARY, compose_cfg("goals=hard")).splitlines()
+    full = table(SUMMARY, compose_cfg("goals=hard"), sampled=False).splitlines()
     assert full[2].split() == ["success", "95.2%", "79.3%"]
     assert full[3].split() == ["drop", "1.2%", "15.7%"]
-    sparse = table(SUMMARY, compose_cfg("noise=paper")).splitlines()  # Table III: success only
+    # Table III: success only
+    sparse = table(SUMMARY, compose_cfg("noise=paper"), sampled=True).splitlines()
     assert sparse[2].split() == ["success", "95.2%", "93.2%"]
     assert sparse[3].split() == ["drop", "1.2%", "-"]
     assert len({len(line) for line in sparse[1:]}) == 1  # every row as wide as the header
-    assert "sampled actions" in sparse[0]
+    assert "sampled actions" in sparse[0] and "deterministic actions" in full[0]
     assert paper_row(compose_cfg("object.name=pole", "perturb=heavier")) is not None
     assert paper_row(compose_cfg("goals=easy", "noise=paper")) is None
     assert paper_row(compose_cfg("object=cube", "goals=hard"))["success_rate"] == "0.714"
@@ -24,5 +25,5 @@ def test_table_sets_ours_beside_the_papers_cells_in_aligned_columns(compose_cfg)
 
 def test_a_run_without_successes_shows_no_mean_time(compose_cfg):
     none = {**SUMMARY, "success_rate": 0.0, "avg_time_s": float("nan")}
-    rows = table(none, compose_cfg("learner=ddpg", "goals=easy")).splitlines()
+    rows = table(none, compose_cfg("learner=ddpg", "goals=easy"), sampled=False).splitlines()
     assert rows[5].split() == ["avg", "time", "(s)", "-", "1.82"]

@@ -293,7 +293,7 @@ def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
     finally:
         bar.close()
         env.close()
-    say(table(summary, cfg))
+    say(table(summary, cfg, sampled=cfg.eval.sample and learner.stochastic))
     return summary
 
 
@@ -316,8 +316,9 @@ def _seconds(value: float) -> str:
     return f"{value:10.2f}" if math.isfinite(value) else f"{'-':>10s}"
 
 
-def table(summary: dict[str, float], cfg) -> str:
-    """The evaluation beside the paper's numbers for the same setting."""
+def table(summary: dict[str, float], cfg, sampled: bool) -> str:
+    """The evaluation beside the paper's numbers for the same setting; ``sampled``: the
+    policy drew its actions (else it acted deterministically)."""
     paper = paper_row(cfg)
 
     def cell(key: str, fmt: str) -> str:
@@ -325,7 +326,7 @@ def table(summary: dict[str, float], cfg) -> str:
             return f"{'-':>10s}"
         return format(float(paper[key]), fmt)
 
-    how = "sampled" if cfg.eval.sample else "most likely"
+    how = "sampled" if sampled else "deterministic"
     head = f"{cfg.learner.name} {cfg.goals.name} {cfg.object.name} perturb={cfg.perturb.name} " \
            f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions"
     flips = [f"{label:14s}{summary[f'{flag}_success_rate']:10.1%}{'-':>10s}"

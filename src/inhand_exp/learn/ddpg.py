@@ -47,6 +47,7 @@ class DDPG:
     """Actor, critic, their targets, optimisers and the replay buffer."""
 
     per_action_log = False  # one action per control period: /eval/episode only
+    stochastic = False  # the actor's torques; exploration noise is for training only
     env_class = TorqueEnv
 
     def __init__(self, obs_dim: int, n_joints: int, max_torque: float, params: DDPGConfig):

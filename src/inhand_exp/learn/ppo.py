@@ -77,6 +77,7 @@ class PPO:
     """
 
     per_action_log = True
+    stochastic = True  # a categorical distribution over the actions
     env_class = PrimitiveEnv  # the batched mid-level environment
 
     def __init__(self, obs_dim: int, n_actions: int, params: PPOConfig,

@@ -28,6 +28,7 @@ class Learner(Protocol):
     iteration: int  # optimisation iterations done (over every resumed leg)
     frames: int  # environment frames learned from
     per_action_log: bool  # its evaluation logs each action (/episode/action): the mid level
+    stochastic: bool  # its policy draws its actions under eval.sample (else it has one answer)
     env_class: type[EnvBase]  # what it acts in, batched by ``envs.batched.batched_env``
 
     def train(self, env: EnvBase, frames: int, progress: Progress | None = None,

@@ -104,6 +104,7 @@ class Search:
     """The graph, and a policy that walks it (see the module docstring)."""
 
     per_action_log = True
+    stochastic = False  # the graph's shortest path
     env_class = PrimitiveEnv  # it walks the graph with the mid-level actions
 
     def __init__(self, cfg):

@@ -256,7 +256,7 @@ def test_slide_edges_follow_the_slides_own_force_check(compose_cfg):
     from inhand_exp.control.execute import Observation
     from inhand_exp.control.sample import random_grasp
     from inhand_exp.control.slide import Slide
-    from inhand_exp.task.graph import slide_table
+    from inhand_exp.task.graph import SLIDE_SIGNS, slide_table
 
     cfg = compose_cfg("learner=search", "mode=eval")
     model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
@@ -271,9 +271,9 @@ def test_slide_edges_follow_the_slides_own_force_check(compose_cfg):
         holds = np.zeros((3, 3, 3), dtype=bool)
         holds[0, 1, 2] = True
         for finger in range(3):
-            for sign in (1, -1):
-                slides = bool(slide_table(model, lat, contacts.posture, finger, sign, prim,
-                                          holds)[0, 1, 2, 0])
+            table = slide_table(model, lat, contacts.posture, finger, prim, holds)
+            for d, sign in enumerate(SLIDE_SIGNS):
+                slides = bool(table[d, 0, 1, 2, 0])
                 obs = Observation(q, np.zeros(6), pose, np.zeros(3), 0.0)
                 why = Slide(model, contacts, finger, sign * 0.02, 0.5, prim).start(obs)
                 if why is None or any(w in why for w in force):

@@ -13,9 +13,9 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
 - it carries out the best edge out of its current cell (the least edge time plus shortest
   time beyond; the graph is directed, so only edges that go that way count): the mid-level
   action of that edge (a 2 cm cell is two 1 cm reposes), repeated until the observed cell is
-  the edge's end. When
-  the feasibility filter refuses the best edge's action (the cells allow more flips than the
-  continuous state does), or an edge does not arrive, that edge is cut from the episode's
+  the edge's end. When the feasibility filter refuses the best edge's action (the cells allow
+  more flips than the continuous state does), or an edge does not arrive, that edge is cut
+  from the episode's
   graph and the distances are planned again (one Dijkstra, about 10 ms), so the walk does not
   come back to try it again from a neighbour;
 - at the goal cell, and wherever the graph has no path, it takes the allowed repose that brings

@@ -28,6 +28,7 @@ over the nodes alone.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass
@@ -136,24 +137,28 @@ def pair_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int
     return H
 
 
-def slide_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int, sign: int,
+SLIDE_SIGNS = (1, -1)  # the first axis of ``slide_table``: up, then down the coordinate
+
+
+def slide_table(model: HandModel, lattice: Lattice, posture: Posture, finger: int,
                 prim: PrimitivesConfig, holds: np.ndarray,
                 max_push_n: float = MAX_PUSH_N) -> np.ndarray:
-    """``S[k0, k1, k2, t]``: at contacts ``cs[k0], cs[k1], cs[k2]`` of ``posture`` and angle
-    ``ts[t]``, ``finger`` can slide along its face in the direction ``sign`` of its coordinate,
-    by the slide's own force check (``slide.slide_forces``: the other two fingers hold the
-    weight and the sliding finger's kinetic friction). Only the contacts where ``holds`` (a
-    strict grasp) are checked; the rest are False."""
+    """``S[d, k0, k1, k2, t]``: at contacts ``cs[k0], cs[k1], cs[k2]`` of ``posture`` and angle
+    ``ts[t]``, ``finger`` can slide along its face in the direction ``SLIDE_SIGNS[d]`` of its
+    coordinate, by the slide's own force check (``slide.slide_forces``: the other two fingers
+    hold the weight and the sliding finger's kinetic friction). Only the contacts where
+    ``holds`` (a strict grasp) are checked; the rest are False."""
     K, T = len(lattice.cs), len(lattice.ts)
-    S = np.zeros((K, K, K, T), dtype=bool)
-    drag = drag_of(model, posture.faces[finger], sign)
+    S = np.zeros((len(SLIDE_SIGNS), K, K, K, T), dtype=bool)
+    drags = [drag_of(model, posture.faces[finger], sign) for sign in SLIDE_SIGNS]
     for k in zip(*np.nonzero(holds), strict=True):
         contacts = Contacts(posture, tuple(float(lattice.cs[j]) for j in k))
-        plan = GraspPlan.from_contacts(model, contacts, prim, sliding=finger, drag=drag)
-        rest = GraspPlan.from_contacts(model, contacts, prim, sliding=finger)
-        for t, angle in enumerate(lattice.ts):
-            S[(*k, t)] = slide_forces(plan, rest, finger, float(angle), model, prim,
-                                      max_push_n) is None
+        rest = GraspPlan.from_contacts(model, contacts, prim, sliding=finger)  # both ways
+        for d, drag in enumerate(drags):
+            plan = GraspPlan.from_contacts(model, contacts, prim, sliding=finger, drag=drag)
+            for t, angle in enumerate(lattice.ts):
+                S[(d, *k, t)] = slide_forces(plan, rest, finger, float(angle), model, prim,
+                                             max_push_n) is None
     return S
 
 
@@ -228,15 +233,19 @@ class PoseGraph:
         targets = targets[targets >= 0]
         if targets.size == 0:
             return np.full(self.nodes, np.inf)
-        matrix = self.matrix
-        if cut:  # an infinite weight: no path goes through the edge
-            matrix = matrix.copy()
-            for u, v in cut:
-                row = slice(matrix.indptr[u], matrix.indptr[u + 1])
-                matrix.data[row][matrix.indices[row] == v] = np.inf
         # from the targets along the reversed edges: the time from every node to them
-        return csgraph.dijkstra(matrix.T.tocsr(), directed=True, indices=targets,
-                                min_only=True)
+        reverse = self.reverse
+        if cut:  # an infinite weight: no path goes through the edge
+            reverse = reverse.copy()
+            for u, v in cut:  # the edge u -> v is v's row in the reverse
+                row = slice(reverse.indptr[v], reverse.indptr[v + 1])
+                reverse.data[row][reverse.indices[row] == u] = np.inf
+        return csgraph.dijkstra(reverse, directed=True, indices=targets, min_only=True)
+
+    @functools.cached_property
+    def reverse(self) -> sparse.csr_matrix:
+        """The edges turned round (row v holds the edges into v), built once."""
+        return self.matrix.T.tocsr()
 
     def weight(self, u: int, v: int) -> float:
         """The time of the edge from node ``u`` to node ``v`` (inf where there is none)."""
@@ -293,12 +302,12 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
         n = math.ceil(contact_resolution_m / prim.slide_dc_m - 1e-9)
         for p, posture in enumerate(ps):
             for f in range(3):
-                for sign in (1, -1):
-                    S = slide_table(model, lat, posture, f, sign, prim, squeezes[p])
+                table = slide_table(model, lat, posture, f, prim, squeezes[p])
+                a = np.moveaxis(ids[p], f, 0)
+                for sign, S in zip(SLIDE_SIGNS, table, strict=True):
                     S = np.moveaxis(S, f, 0)[:, :, :, None, None, :]  # (K_f, K, K, 1, 1, T)
-                    a = np.moveaxis(ids[p], f, 0)
                     src, dst = (a[:-1], a[1:]) if sign > 0 else (a[1:], a[:-1])
-                    go = (S[:-1] & S[1:])  # the force check at both ends of the edge
+                    go = S[:-1] & S[1:]  # the force check at both ends of the edge
                     link(np.where(go, src, -1), dst, n * prim.slide_duration_s, both=False)
     if prim.flip:
         for p, posture in enumerate(ps):

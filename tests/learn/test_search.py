@@ -45,6 +45,8 @@ def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
     np.testing.assert_allclose(g.distances_to(goal, {(0, 2), (2, 3)}), [np.inf] * 3 + [0] +
                                [np.inf] * 2)
     np.testing.assert_allclose(g.distances_to(goal), [4.0, 3.0, 2.0, 0.0, np.inf, 5.0])
+    # a spent goal node is no end: with node 3 spent, the goal cell holds no other
+    assert np.isinf(g.distances_to(goal, spent={3})).all()
 
 
 def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_path):
@@ -72,6 +74,10 @@ def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_pa
     obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
     mask = np.ones(len(policy.actions), dtype=bool)
     assert policy.act(0, obs, mask) == best.index
+    # what failed from off the graph is not left out on it: the walk and its distances agree
+    policy.walks[0].edge = None
+    policy.walks[0].blocked.update((t, best.index) for t in policy.successors(cell, best))
+    assert policy.act(0, obs, mask) == best.index
     policy.walks.clear()
     mask[best.index] = False
     chosen = policy.act(0, obs, mask)
@@ -82,6 +88,32 @@ def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_pa
     np.testing.assert_array_equal(walk.field, again)
     assert value(cell, policy.actions[chosen], again) == min(
         value(cell, a, again) for a in policy.actions if a.index != best.index)
+
+
+def test_a_goal_node_the_walk_comes_back_to_no_closer_is_spent(compose_cfg, tmp_path):
+    """At a node of the goal cell whose last reposes the filter refuses, the walk that comes
+    back there no closer to the goal plans on to the goal cell's other nodes."""
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    g, policy = search.ensure_graph(), search.policy
+    lat = g.lattice
+    for cell in (tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0):
+        pose = np.array([lat.xs[cell[4]], lat.zs[cell[5]], lat.ts[cell[6]]])
+        goal = pose + [0.008, 0.0, 0.08]  # in the same pose cell, not reached
+        here = int(g.ids[cell])
+        if np.isfinite(g.distances_to(goal, spent={here})[here]):
+            break
+    contacts = Contacts(g.postures[cell[0]], tuple(float(lat.cs[k]) for k in cell[1:4]))
+    obs = np.zeros(18)
+    obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
+    mask = np.array([a.kind != "repose" for a in policy.actions])  # every repose refused
+    policy.act(0, obs, mask)  # at the goal cell: the closest allowed action
+    walk = policy.walks[0]
+    assert not walk.spent and walk.field is None
+    chosen = policy.actions[policy.act(0, obs, mask)]  # back, no closer: spent
+    assert walk.spent == {here}
+    np.testing.assert_array_equal(walk.field, g.distances_to(goal, spent={here}))
+    ends = [int(g.ids[t]) for t in policy.successors(cell, chosen)]
+    assert any(n >= 0 and n != here and walk.field[n] < walk.field[here] for n in ends)
 
 
 def test_the_end_contact_cells_take_the_ends_of_the_face():

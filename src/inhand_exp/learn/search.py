@@ -19,7 +19,11 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
   graph and the distances are planned again (one Dijkstra, about 10 ms), so the walk does not
   come back to try it again from a neighbour;
 - at the goal cell, and wherever the graph has no path, it takes the allowed repose that brings
-  the object closest to the goal (the cell is up to half a cell from the goal itself).
+  the object closest to the goal (the cell is up to half a cell from the goal itself). When it
+  comes back to a node of the goal cell no closer to the goal than it was there before, that
+  node is spent: the walk plans on to the goal cell's other nodes;
+- an action that failed to arrive from off the graph is not retried from there; on the graph,
+  only cut edges are left out, so that the walk and its distances agree.
 """
 
 from __future__ import annotations
@@ -180,6 +184,8 @@ class _Walk:
     edge: tuple | None = None  # (source node, target cell, action, steps taken, step budget)
     blocked: set = field(default_factory=set)  # (target cell, action) failed from off the graph
     cut: set = field(default_factory=set)  # edges (node pairs) that failed or were refused
+    spent: set = field(default_factory=set)  # goal-cell nodes whose last reposes got stuck
+    closest: dict = field(default_factory=dict)  # goal-cell node -> least error seen there
     field: np.ndarray | None = None  # distances to the goal without the cut edges
 
 
@@ -290,12 +296,15 @@ class SearchPolicy:
                 walk.edge = None
         d = walk.field if walk.field is not None else self.field_for(goal)
         here = int(ids[cell]) if cell is not None else -1
+        if here >= 0 and d[here] == 0.0 and self._stuck(walk, here, pose, goal):
+            d = self._replan(walk, goal)
         while cell is not None and not (here >= 0 and d[here] == 0.0):
             best, choice = math.inf, None
             for a in self.actions:
                 for t in self.successors(cell, a):
                     n = int(ids[t])
-                    if n < 0 or (t, a.index) in walk.blocked or (here, n) in walk.cut:
+                    if n < 0 or (here, n) in walk.cut or (here < 0 and (t, a.index)
+                                                          in walk.blocked):
                         continue
                     # on the graph, along its edges only (a slide friction forbids is none)
                     cost = d[n] + self.graph.weight(here, n) if here >= 0 else d[n]
@@ -322,8 +331,25 @@ class SearchPolicy:
             walk.blocked.update((t, action) for t in targets)
             return walk.field if walk.field is not None else self.field_for(goal)
         walk.cut.update((source, int(ids[t])) for t in targets if ids[t] >= 0)
-        walk.field = self.graph.distances_to(goal, walk.cut)
+        return self._replan(walk, goal)
+
+    def _replan(self, walk: _Walk, goal: np.ndarray) -> np.ndarray:
+        walk.field = self.graph.distances_to(goal, walk.cut, walk.spent)
         return walk.field
+
+    def _stuck(self, walk: _Walk, node: int, pose: np.ndarray, goal: np.ndarray) -> bool:
+        """Whether the last reposes from goal-cell node ``node`` got stuck: the walk is back
+        there no closer to the goal than before (a repose the filter refuses here, say, so
+        that the closest allowed one leaves the cell and the walk comes back). Such a node is
+        spent: the walk goes on to the goal cell's other nodes (other contacts, or another
+        posture), from which the last reposes may be allowed."""
+        error = to_go(pose, goal, self.rules)
+        seen = walk.closest.get(node)
+        if seen is not None and error >= seen - 1e-9:
+            walk.spent.add(node)
+            return True
+        walk.closest[node] = error
+        return False
 
     def closest_repose(self, pose: np.ndarray, goal: np.ndarray, mask: np.ndarray) -> int:
         """The allowed action whose pose change brings the object closest to the goal (a

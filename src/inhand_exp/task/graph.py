@@ -221,16 +221,19 @@ class PoseGraph:
             return -1
         return int(self.ids[(self.postures.index(contacts.posture), *ks, *cell)])
 
-    def distances_to(self, goal: np.ndarray, cut: set[tuple[int, int]] = frozenset()
-                     ) -> np.ndarray:
+    def distances_to(self, goal: np.ndarray, cut: set[tuple[int, int]] = frozenset(),
+                     spent: set[int] = frozenset()) -> np.ndarray:
         """Shortest time (s) from every node to any node at the goal's pose cell (inf where
         none is reachable; all inf when the goal cell holds no node), without the edges
-        ``cut`` (node pairs, from the first to the second)."""
+        ``cut`` (node pairs, from the first to the second) and without the goal cell's nodes
+        ``spent`` as ends."""
         cell = self.lattice.pose_cell(goal)
         if cell is None:
             return np.full(self.nodes, np.inf)
         targets = self.ids[(..., *cell)]
         targets = targets[targets >= 0]
+        if spent:
+            targets = targets[~np.isin(targets, list(spent))]
         if targets.size == 0:
             return np.full(self.nodes, np.inf)
         # from the targets along the reversed edges: the time from every node to them

@@ -82,6 +82,20 @@ def test_graph_reports_its_size_and_cost(capsys):
     assert out["cells"] >= out["nodes"] and out["build_s"] > 0 and out["query_s"] > 0
 
 
+def test_random_torques_drop_the_pole_and_the_controllers_stay_far_below_the_limit(capsys):
+    """The end-to-end policy's starting point: under random torques of any scale the pole is
+    lost within the first fraction of a second, while the controllers hold it with torques
+    mostly well inside ``hand.max_torque_nm``."""
+    main(["torques", "--trials", "2", "--actions", "6", "--seed", "1"])
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["episodes"] == 2 and set(out["held_max_s"]) == {"0.0", "0.1", "0.3", "1.0", "10.0"}
+    assert all(0.0 < t < 1.0 for t in out["held_max_s"].values())
+    pct = list(out["controller_abs_torque_pct"].values())
+    assert out["controller_steps"] > 6 and pct == sorted(pct)
+    assert 0.0 < pct[2] < out["max_torque_nm"] / 2 and pct[-1] <= out["max_torque_nm"]
+    assert 0.0 <= out["controller_at_limit"] < 0.01
+
+
 def test_bad_input_is_refused():
     with pytest.raises(SystemExit, match="2"):
         main(["primitives", "--trials", "0"])

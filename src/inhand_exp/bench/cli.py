@@ -7,6 +7,7 @@
     inhand-bench graph [learner.resolution_m=M learner.resolution_rad=R ...]
     inhand-bench flips [--trials N] [--seed S] [overrides...]
     inhand-bench load [--minutes M] [--workers W] [overrides...]
+    inhand-bench torques [--trials N] [--actions N] [--seed S] [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -175,7 +176,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("what", choices=("speed", "primitives", "env", "graph", "load",
-                                         "flips"))
+                                         "flips", "torques"))
     parser.add_argument("--minutes", type=float, default=30.0, help="load: how long")
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
@@ -184,6 +185,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--workers", type=int, default=1, help="worker processes")
     parser.add_argument("--steps", type=int, default=8,
                         help="env: steps of the whole batch (train.num_envs actions each)")
+    parser.add_argument("--actions", type=int, default=200,
+                        help="torques: random mid-level actions whose torques are recorded")
     parser.add_argument("--only", default="", help="comma-separated sections")
     parser.add_argument("--seconds", type=float, default=5.0, help="speed: loop timing budget")
     parser.add_argument("--primitive-runs", type=int, default=5,
@@ -192,7 +195,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_intermixed_args(argv)
     if args.trials is not None and args.trials <= 0:
         parser.error(f"--trials must be > 0, got {args.trials}")
-    learner = ["learner=search", "mode=eval"] if args.what == "graph" else []
+    learner = {"graph": ["learner=search", "mode=eval"],
+               "torques": ["learner=ddpg", "mode=train"]}.get(args.what, [])
     try:
         cfg = load_config(args.object, [*learner, *args.overrides])
     except (ConfigError, ConfigCompositionException) as err:
@@ -207,6 +211,10 @@ def main(argv: list[str] | None = None) -> None:
         from inhand_exp.bench.flips import flip_conditions
 
         result = flip_conditions(cfg, args.trials or 300, args.seed)
+    elif args.what == "torques":
+        from inhand_exp.bench.torques import torque_exploration
+
+        result = torque_exploration(cfg, args.trials or 20, args.actions, args.seed)
     elif args.what == "graph":
         from inhand_exp.bench.graph import graph_size
 

@@ -211,6 +211,8 @@ class DDPGConfig(LearnerConfig):
                               "acts (fills the replay buffer).", ge=0)
     frames_per_batch: int = spec(1024, "Frames collected per iteration.", gt=0)
     updates_per_batch: int = spec(256, "Gradient steps per collected batch.", gt=0)
+    normalize: bool = spec(True, "Standardise the networks' observation by the warm-up's "
+                           "mean and standard deviation (then kept).")
 
 
 @dataclass

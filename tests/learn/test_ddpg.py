@@ -38,6 +38,23 @@ def test_ddpg_learns_the_toy_reach_task():
     assert seen[-1]["frames"] == 4000 and {"loss_actor", "loss_value"} <= set(seen[-1])
 
 
+def test_the_observation_is_standardised_by_the_warm_up_before_any_gradient_step():
+    torch.manual_seed(0)
+    ddpg = DDPG(OBS_DIM, 6, 1.0, SMALL)
+    seen = []
+    ddpg.train(ToyReachEnv(seed=3), 600, progress=lambda i, m: seen.append(m))
+    assert [("loss_value" in m) for m in seen] == [False, True, True]  # warm-up: 2 batches
+    warm = ddpg.buffer[:400]["observation"]
+    actor, critic = ddpg.norms
+    assert actor.fitted and critic.fitted
+    torch.testing.assert_close(actor.loc, warm.mean(0))
+    torch.testing.assert_close(actor.scale, warm.std(0).clamp_min(1e-2))
+    torch.testing.assert_close(critic.loc, actor.loc)
+    targets = ddpg.loss.target_actor_network_params.flatten_keys(".")
+    loc = next(v for k, v in targets.items() if k.endswith("loc"))
+    torch.testing.assert_close(loc, actor.loc)  # the target network standardises the same way
+
+
 def test_checkpoint_round_trip_and_refusals(tmp_path):
     torch.manual_seed(0)
     a = DDPG(OBS_DIM, 6, 1.0, SMALL)

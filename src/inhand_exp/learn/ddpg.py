@@ -7,6 +7,13 @@ paper; the actor ends in a tanh scaled to the torque limits. The first ``warmup_
 collected with uniformly random torques. Each iteration collects ``frames_per_batch`` frames
 from the batched ``TorqueEnv`` and takes ``updates_per_batch`` gradient steps.
 
+Both networks standardise the observation first (``normalize``, as DDPG's authors did with
+batch normalisation of the state input): its mean and standard deviation are measured once, on
+the warm-up's transitions before the first gradient step, and then kept, as buffers saved
+with the networks. The critic also
+sees the action as a fraction of the torque limit. Without it, joint velocities of 60-100 rad/s
+(the fingers under random torques) reach the first layers unscaled.
+
 It is a ``learn.registry.Learner``: it reports through ``progress(iteration, metrics)``, and its
 checkpoint (networks, targets, optimisers, counters, RNG state; plain tensors, loadable with
 ``weights_only=True``) resumes training. The replay buffer is not saved: a resumed run refills
@@ -37,6 +44,39 @@ KEEP = ("observation", "action", ("next", "observation"), ("next", "reward"),
         ("next", "done"), ("next", "terminated"), ("next", "success"), ("next", "dropped"))
 
 
+class Standardize(nn.Module):
+    """(x - mean) / std with the statistics of the data it was ``fit`` on (identity before)."""
+
+    def __init__(self, n: int):
+        super().__init__()
+        self.register_buffer("loc", torch.zeros(n))
+        self.register_buffer("scale", torch.ones(n))
+        self.register_buffer("fitted", torch.zeros((), dtype=torch.bool))
+
+    def fit(self, x: torch.Tensor, floor: float = 1e-2) -> None:
+        self.loc.copy_(x.mean(0))
+        self.scale.copy_(x.std(0).clamp_min(floor))
+        self.fitted.fill_(True)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.loc) / self.scale
+
+
+class Critic(nn.Module):
+    """Q(observation, action) from the standardised observation and the action as a fraction
+    of the torque limit."""
+
+    def __init__(self, obs_dim: int, n_joints: int, max_torque: float, hidden: list[int]):
+        super().__init__()
+        self.norm = Standardize(obs_dim)
+        self.max_torque = max_torque
+        self.mlp = MLP(in_features=obs_dim + n_joints, out_features=1, num_cells=hidden,
+                       activation_class=nn.ReLU)
+
+    def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.mlp(torch.cat([self.norm(observation), action / self.max_torque], -1))
+
+
 def from_config(cfg) -> DDPG:
     """The DDPG learner of ``cfg`` (the ``ddpg`` entry of the registry)."""
     hand = typed(cfg.hand, HandConfig)
@@ -55,15 +95,14 @@ class DDPG:
         self.max_torque = max_torque
         spec = Bounded(-max_torque, max_torque, shape=(n_joints,), dtype=torch.float32)
         hidden = list(params.hidden)
+        critic = Critic(obs_dim, n_joints, max_torque, hidden)
+        self.norms = (Standardize(obs_dim), critic.norm)  # the actor's and the critic's
         self.actor = TensorDictSequential(
-            TensorDictModule(MLP(in_features=obs_dim, out_features=n_joints, num_cells=hidden,
-                                 activation_class=nn.ReLU),
-                             in_keys=["observation"], out_keys=["param"]),
+            TensorDictModule(nn.Sequential(self.norms[0], MLP(
+                in_features=obs_dim, out_features=n_joints, num_cells=hidden,
+                activation_class=nn.ReLU)), in_keys=["observation"], out_keys=["param"]),
             TanhModule(in_keys=["param"], out_keys=["action"], spec=spec))
-        self.critic = ValueOperator(
-            MLP(in_features=obs_dim + n_joints, out_features=1, num_cells=hidden,
-                activation_class=nn.ReLU),
-            in_keys=["observation", "action"])
+        self.critic = ValueOperator(critic, in_keys=["observation", "action"])
         self.loss = DDPGLoss(self.actor, self.critic, delay_actor=True, delay_value=True)
         self.loss.make_value_estimator(gamma=params.gamma)
         self.target = SoftUpdate(self.loss, tau=params.tau)
@@ -100,7 +139,10 @@ class DDPG:
             for batch in collector:
                 collected = time.perf_counter()
                 self.buffer.extend(batch.reshape(-1).select(*KEEP))
-                metrics = self._update(batch) if len(self.buffer) >= p.batch_size else {}
+                if p.normalize and not self.fitted and len(self.buffer) >= max(warm, 2):
+                    self._fit()  # once, on the warm-up, before the first gradient step
+                ready = len(self.buffer) >= p.batch_size and (self.fitted or not p.normalize)
+                metrics = self._update(batch) if ready else {}
                 collector.update_policy_weights_()
                 learned = time.perf_counter()
                 self.iteration += 1
@@ -116,6 +158,21 @@ class DDPG:
             collector.shutdown()
         if checkpoint is not None:
             self.save(checkpoint)
+
+    @property
+    def fitted(self) -> bool:
+        return bool(self.norms[0].fitted)
+
+    def _fit(self) -> None:
+        """Standardise the observation by the replay buffer's statistics (the warm-up's), in
+        the actor and the critic and in their targets."""
+        obs = self.buffer[:]["observation"].float()
+        for norm in self.norms:
+            norm.fit(obs)
+        loss = self.loss
+        for live, target in ((loss.actor_network_params, loss.target_actor_network_params),
+                             (loss.value_network_params, loss.target_value_network_params)):
+            target.data.copy_(live.data)
 
     def _update(self, batch) -> dict[str, float]:
         sums = torch.zeros(2)

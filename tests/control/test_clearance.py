@@ -96,3 +96,42 @@ def test_vectorised_clearance_equals_the_scalar_reference(model):
         space = FreeSpace(model, i, pose, margin=0.005)
         assert space.ok_many(Q).tolist() == [space.ok(q) for q in Q]
         assert space.grid.any() and not space.grid.all()
+
+
+def test_segment_box_distance_against_dense_sampling():
+    """The closed form against the distance of 2,001 points along each segment (their
+    spacing bounds the sampling's error): meeting, passing a corner, beside a face."""
+    rng = np.random.default_rng(11)
+    hx, hz = 0.01, 0.25
+    seg = rng.uniform(-0.4, 0.4, (600, 4))
+    seg[::5, 0::2] *= 0.1  # many near the thin box, some through it
+    s = np.linspace(0.0, 1.0, 2001)[:, None]
+    many = segment_box_distances(*seg.T, hx, hz)
+    for (ax, az, bx, bz), d in zip(seg, many, strict=True):
+        x, z = ax + s * (bx - ax), az + s * (bz - az)
+        sampled = float(np.hypot(np.maximum(np.abs(x) - hx, 0), np.maximum(np.abs(z) - hz, 0))
+                        .min())
+        spacing = math.hypot(bx - ax, bz - az) / 2000
+        assert sampled - spacing - 1e-12 <= d <= sampled + 1e-12
+        assert segment_box_distance(ax, az, bx, bz, hx, hz) == pytest.approx(d, abs=1e-12)
+    assert (many == 0.0).sum() > 20 and (many > 0.0).sum() > 200
+
+
+def test_free_space_grid_and_batched_segments_are_the_pointwise_answers(model):
+    """The grid (each proximal link checked once, broadcast) is ``ok_many`` of its cells, and
+    the shortening's batch of moves holds exactly ``segment_points`` of each move."""
+    from inhand_exp.control.joint_path import _segments, segment_points
+
+    rng = np.random.default_rng(2)
+    for i in range(3):
+        pose = np.array([rng.uniform(-0.05, 0.05), rng.uniform(0.3, 0.5), rng.uniform(-1, 1)])
+        space = FreeSpace(model, i, pose, margin=0.006)
+        ij = np.stack(np.meshgrid(np.arange(space.n), np.arange(space.n), indexing="ij"), -1)
+        flat = space.ok_many(space.lo + space.step * ij.reshape(-1, 2))
+        assert np.array_equal(space.grid, flat.reshape(space.n, space.n))
+        a = rng.uniform(space.lo, space.hi)
+        ends = rng.uniform(space.lo, space.hi, (7, 2))
+        ends[3] = a + 1e-3  # a move shorter than one step: its two ends
+        points, owner = _segments(a, ends)
+        for j, b in enumerate(ends):
+            assert np.array_equal(points[owner == j], segment_points(a, b))

@@ -14,79 +14,64 @@ import math
 import numpy as np
 
 
-def _clip(p: float, q: float, t0: float, t1: float) -> tuple[float, float] | None:
-    """One Liang-Barsky step: the part of [t0, t1] where ``p t <= q``."""
-    if p == 0.0:
-        return (t0, t1) if q >= 0.0 else None
-    r = q / p
-    if p < 0.0:
-        t0 = max(t0, r)
-    else:
-        t1 = min(t1, r)
-    return (t0, t1) if t0 <= t1 else None
-
-
-def segment_crosses_box(ax: float, az: float, bx: float, bz: float, hx: float, hz: float
-                        ) -> bool:
-    """True when segment a-b meets the box ``|x| <= hx, |z| <= hz``."""
-    dx, dz = bx - ax, bz - az
-    span: tuple[float, float] | None = (0.0, 1.0)
-    for p, q in ((-dx, ax + hx), (dx, hx - ax), (-dz, az + hz), (dz, hz - az)):
-        span = _clip(p, q, *span)
-        if span is None:
-            return False
-    return True
-
-
 def _point_box(x: float, z: float, hx: float, hz: float) -> float:
     ex, ez = max(abs(x) - hx, 0.0), max(abs(z) - hz, 0.0)
     return math.hypot(ex, ez)
-
-
-def _point_segment(x: float, z: float, ax: float, az: float, bx: float, bz: float) -> float:
-    dx, dz = bx - ax, bz - az
-    n = dx * dx + dz * dz
-    s = 0.0 if n == 0.0 else min(1.0, max(0.0, ((x - ax) * dx + (z - az) * dz) / n))
-    return math.hypot(ax + s * dx - x, az + s * dz - z)
 
 
 def segment_box_distance(ax: float, az: float, bx: float, bz: float, hx: float, hz: float
                          ) -> float:
     """Distance (m) from segment a-b to the box ``|x| <= hx, |z| <= hz``; 0 when they meet.
 
-    Between a segment and a convex polygon that do not meet, the distance is reached at an end
-    of the segment or at a corner of the polygon.
+    They meet when no separating axis parts them: neither x nor z (the bounding boxes
+    overlap) nor the segment's normal. Between a segment and a convex polygon that do not meet,
+    the distance is reached at an end of the segment or at a corner of the polygon: a corner's
+    distance to the segment's line where its foot falls inside the segment (a foot outside is
+    farther than the nearer end is from the box).
     """
-    if segment_crosses_box(ax, az, bx, bz, hx, hz):
+    dx, dz = bx - ax, bz - az
+    if (max(ax, bx) >= -hx and min(ax, bx) <= hx and max(az, bz) >= -hz and min(az, bz) <= hz
+            and abs(dz * ax - dx * az) <= abs(dz) * hx + abs(dx) * hz):
         return 0.0
     best = min(_point_box(ax, az, hx, hz), _point_box(bx, bz, hx, hz))
+    n = dx * dx + dz * dz
     for cx in (-hx, hx):
+        ex = cx - ax
         for cz in (-hz, hz):
-            best = min(best, _point_segment(cx, cz, ax, az, bx, bz))
+            ez = cz - az
+            foot = ex * dx + ez * dz
+            if 0.0 < foot < n:
+                best = min(best, abs(dx * ez - dz * ex) / math.sqrt(n))
     return best
 
 
 def segment_box_distances(ax: np.ndarray, az: np.ndarray, bx: np.ndarray, bz: np.ndarray,
                           hx: float, hz: float) -> np.ndarray:
-    """``segment_box_distance`` over arrays of segments at once (the same answers)."""
+    """``segment_box_distance`` over arrays of segments at once (the same answers, to rounding);
+    the four arrays may broadcast.
+
+    A segment meets the box when no separating axis parts them: neither x nor z (the bounding
+    boxes overlap) nor the segment's normal. Otherwise the distance is an end's to the box or
+    a corner's to the segment's line, where the corner's foot falls inside the segment (a foot
+    outside is farther than the nearer end is from the box).
+    """
     dx, dz = bx - ax, bz - az
-    t0, t1 = np.zeros(ax.shape), np.ones(ax.shape)
-    meets = np.ones(ax.shape, dtype=bool)
-    for p, q in ((-dx, ax + hx), (dx, hx - ax), (-dz, az + hz), (dz, hz - az)):
-        flat = p == 0.0
-        meets &= ~flat | (q >= 0.0)
-        r = q / np.where(flat, 1.0, p)
-        t0 = np.where(p < 0.0, np.maximum(t0, r), t0)
-        t1 = np.where(p > 0.0, np.minimum(t1, r), t1)
-    meets &= t0 <= t1
+    meets = ((np.maximum(ax, bx) >= -hx) & (np.minimum(ax, bx) <= hx)
+             & (np.maximum(az, bz) >= -hz) & (np.minimum(az, bz) <= hz)
+             & (np.abs(dz * ax - dx * az) <= np.abs(dz) * hx + np.abs(dx) * hz))
     best = np.minimum(np.hypot(np.maximum(np.abs(ax) - hx, 0.0), np.maximum(np.abs(az) - hz, 0.0)),
                       np.hypot(np.maximum(np.abs(bx) - hx, 0.0), np.maximum(np.abs(bz) - hz, 0.0)))
     n = dx * dx + dz * dz
-    safe = np.where(n == 0.0, 1.0, n)
+    cross = np.full(n.shape, np.inf)  # |d x (corner - a)|, the line's distance times |d|
     for cx in (-hx, hx):
+        ex = cx - ax
         for cz in (-hz, hz):
-            s = np.where(n == 0.0, 0.0, np.clip(((cx - ax) * dx + (cz - az) * dz) / safe, 0.0, 1.0))
-            best = np.minimum(best, np.hypot(ax + s * dx - cx, az + s * dz - cz))
+            ez = cz - az
+            foot = ex * dx + ez * dz
+            cross = np.where((foot > 0.0) & (foot < n),
+                             np.minimum(cross, np.abs(dx * ez - dz * ex)), cross)
+    with np.errstate(divide="ignore", invalid="ignore"):  # n = 0: no foot inside, inf / 0
+        best = np.minimum(best, cross / np.sqrt(n))
     return np.where(meets, 0.0, best)
 
 

@@ -127,8 +127,14 @@ class HandModel:
 
     def finger_gaps(self, i: int, Q: np.ndarray, pose: np.ndarray) -> np.ndarray:
         """``finger_gap`` for many joint angles ``Q`` (n, 2) of finger ``i`` at once."""
+        return self.joint_gaps(i, Q[:, 0], Q[:, 1], pose)
+
+    def joint_gaps(self, i: int, q1: np.ndarray, q2: np.ndarray, pose: np.ndarray
+                   ) -> np.ndarray:
+        """``finger_gap`` for arrays of first and second joint angles that broadcast
+        together. A grid (``q1`` a column, ``q2`` a row) checks each proximal link once."""
         f = self.fingers[i]
-        q1, q12 = Q[:, 0], Q[:, 0] + Q[:, 1]
+        q12 = q1 + q2
         ex, ez = f.base_x + f.l1 * np.cos(q1), f.base_z + f.l1 * np.sin(q1)
         tx, tz = ex + f.l2 * np.cos(q12), ez + f.l2 * np.sin(q12)
         lo, hi = self.palm_x

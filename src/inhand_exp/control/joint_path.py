@@ -15,6 +15,7 @@ waypoints with one minimum-jerk move per segment and a joint-space PD with feed-
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -26,9 +27,10 @@ from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import min_jerk
 
 SCALAR_POINTS = 8  # segments checked at fewer points than this are checked point by point
+STEP_RAD = 0.02  # a segment is checked at points at most this far apart in joint space
 
 
-def segment_points(a: np.ndarray, b: np.ndarray, step_rad: float = 0.02) -> np.ndarray:
+def segment_points(a: np.ndarray, b: np.ndarray, step_rad: float = STEP_RAD) -> np.ndarray:
     """Joint angles (n, 2) from ``a`` to ``b``, both included, at most ``step_rad`` apart."""
     n = max(2, int(math.ceil(float(np.max(np.abs(b - a))) / step_rad)) + 1)
     return a + (b - a) * np.linspace(0.0, 1.0, n)[:, None]
@@ -51,24 +53,35 @@ class FreeSpace:
         self.n = cells
         self.step = (self.hi - self.lo) / (cells - 1)
         self._c, self._s = math.cos(pose[2]), math.sin(pose[2])
-        ij = np.stack(np.meshgrid(np.arange(cells), np.arange(cells), indexing="ij"), axis=-1)
-        self.grid = self.ok_many(self.lo + self.step * ij.reshape(-1, 2)).reshape(cells, cells)
         self._graph = None
         self._ways: dict[tuple[int, int], np.ndarray] = {}  # start cell -> predecessors
+
+    @functools.cached_property
+    def grid(self) -> np.ndarray:
+        """Which cells (``cells`` x ``cells``, first joint by row) are free: computed when a
+        path is first searched for (many flips are refused before), each proximal link once."""
+        k = np.arange(self.n)
+        return self._ok((self.lo[0] + self.step[0] * k)[:, None],
+                        (self.lo[1] + self.step[1] * k)[None, :])
 
     def ok_many(self, Q: np.ndarray) -> np.ndarray:
         """For each row of ``Q`` (n, 2): the links and the tip clear of the object by the
         margin, joints inside the limits and above the palm."""
+        return self._ok(Q[:, 0], Q[:, 1])
+
+    def _ok(self, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+        """``ok_many`` for first and second joint angles that broadcast together."""
         m, i = self.model, self.finger
         f = m.fingers[i]
-        inside = np.all((self.lo - 1e-9 <= Q) & (self.hi + 1e-9 >= Q), axis=1)
-        q12 = Q[:, 0] + Q[:, 1]
-        tx = f.base_x + f.l1 * np.cos(Q[:, 0]) + f.l2 * np.cos(q12)
-        tz = f.base_z + f.l1 * np.sin(Q[:, 0]) + f.l2 * np.sin(q12)
+        inside = ((self.lo[0] - 1e-9 <= q1) & (self.hi[0] + 1e-9 >= q1)
+                  & (self.lo[1] - 1e-9 <= q2) & (self.hi[1] + 1e-9 >= q2))
+        q12 = q1 + q2
+        tx = f.base_x + f.l1 * np.cos(q1) + f.l2 * np.cos(q12)
+        tz = f.base_z + f.l1 * np.sin(q1) + f.l2 * np.sin(q12)
         x, z = to_object(tx, tz, self.pose[0], self.pose[1], self._c, self._s)
         hx, hz = m.shape.half_x, m.shape.half_z
         air = np.hypot(np.maximum(np.abs(x) - hx, 0.0), np.maximum(np.abs(z) - hz, 0.0))
-        return (inside & (m.finger_gaps(i, Q, self.pose) >= self.margin)
+        return (inside & (m.joint_gaps(i, q1, q2, self.pose) >= self.margin)
                 & (air >= m.tip_radius + self.margin) & (tz >= f.base_z + m.tip_radius))
 
     def ok(self, q: np.ndarray) -> bool:
@@ -180,16 +193,27 @@ def _shorten(space: FreeSpace, path: list[np.ndarray]) -> list[np.ndarray] | Non
     out = [path[0]]
     k = 0
     while k < len(path) - 1:
-        points = [segment_points(path[k], path[j]) for j in range(k + 1, len(path))]
-        owner = [np.full(len(p), j) for j, p in enumerate(points, start=k + 1)]
-        ok = space.ok_many(np.concatenate(points))
-        bad = set(np.concatenate(owner)[~ok].tolist())
-        clear = [j for j in range(k + 1, len(path)) if j not in bad]
-        if not clear or (clear[-1] == k + 1 and k + 1 in bad):
+        points, owner = _segments(path[k], np.array(path[k + 1:]))
+        blocked = np.zeros(len(path) - k - 1, dtype=bool)
+        blocked[owner[~space.ok_many(points)]] = True
+        clear = np.flatnonzero(~blocked)
+        if not len(clear):
             return None
-        k = clear[-1]
+        k += 1 + int(clear[-1])
         out.append(path[k])
     return out
+
+
+def _segments(a: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``segment_points(a, b)`` for every row ``b`` of ``ends``, concatenated, and the row
+    each point belongs to (the same points, computed at once)."""
+    span = np.max(np.abs(ends - a), axis=1)
+    counts = np.maximum(2, np.ceil(span / STEP_RAD).astype(int) + 1)
+    owner = np.repeat(np.arange(len(ends)), counts)
+    starts = np.cumsum(counts) - counts
+    t = (np.arange(len(owner)) - starts[owner]) * np.repeat(1.0 / (counts - 1), counts)
+    t[starts + counts - 1] = 1.0  # as numpy's linspace ends: exactly at b
+    return a + (ends[owner] - a) * t[:, None], owner
 
 
 def arrival_times(waypoints: list[np.ndarray], t0: float, t1: float) -> list[float]:

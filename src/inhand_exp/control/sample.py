@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from inhand_exp.config import PrimitivesConfig
-from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
+from inhand_exp.control.grasp import Contacts, Face, Posture, face_axes, rotation
 from inhand_exp.control.hand import GeometryError, HandModel
 from inhand_exp.control.repose import strict_hold
 
@@ -56,25 +56,80 @@ def holds_at(model: HandModel, contacts: Contacts, pose: np.ndarray, press: floa
     return None
 
 
+GUARD = 1e-9  # a vectorised test this close to its threshold is left to the scalar code
+
+
 def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
                 step_m: float = 0.005, margin: float = 0.1) -> list[float]:
     """Coordinates along ``face`` (every ``step_m``) where ``finger`` alone can touch the
-    object at ``pose``: reach, joint limits with ``margin`` and links clear."""
+    object at ``pose``: reach, joint limits with ``margin`` and links clear.
+
+    The grid is checked at once (numpy: inverse kinematics of both elbow branches, limits,
+    link gaps, each on the coordinates that passed the test before); a coordinate whose answer
+    lies within ``GUARD`` of a threshold, where numpy's rounding could differ from the plain
+    floats', is decided by ``_touches``, the scalar reference, so the answer is always the
+    reference's."""
     r = model.tip_radius
     n = int((model.shape.half_extent(face) - 2 * r) // step_m)
-    R, f = rotation(pose[2]), model.fingers[finger]
-    out = []
-    for k in range(-n, n + 1):
-        c = k * step_m
-        point, inward = model.shape.local_contact(face, c)
-        target = pose[:2] + R @ (point - r * inward)
-        for elbow in (1, -1):
-            qi = f.ik(target, elbow)
-            if (qi is not None and f.within_limits(qi, margin)
-                    and model.finger_gap(finger, qi, pose) >= model.clearance):
-                out.append(c)
-                break
-    return out
+    f = model.fingers[finger]
+    coords = np.arange(-n, n + 1) * step_m
+    point, inward = model.shape.local_contact(face, 0.0)
+    _, along = face_axes(face)
+    ox = point[0] - r * inward[0] + along[0] * coords
+    oz = point[1] - r * inward[1] + along[1] * coords
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    dx, dz = pose[0] + c * ox - s * oz - f.base_x, pose[1] + s * ox + c * oz - f.base_z
+    c2 = (dx * dx + dz * dz - f.l1**2 - f.l2**2) / (2 * f.l1 * f.l2)
+    near = np.flatnonzero(np.abs(c2) <= 1.0 + 1e-6)  # reached, or too close to tell
+    if not len(near):
+        return []
+    found, unsure = np.zeros(len(coords), dtype=bool), np.zeros(len(coords), dtype=bool)
+    # both branches at once: the first half elbow +1 (q2 > 0), the second -1, as ``ik``
+    k = np.concatenate([near, near])
+    elbow = np.repeat([1.0, -1.0], len(near))
+    cc = c2[k]
+    doubt = np.abs(np.abs(cc) - 1.0) < 1e-6  # acos is steep there: a wide band
+    q2 = elbow * np.arccos(np.clip(cc, -1.0, 1.0))
+    q1 = np.arctan2(dz[k], dx[k]) - np.arctan2(f.l2 * np.sin(q2), f.l1 + f.l2 * cc)
+    wrapped = np.mod(q1 - f.q_lower[0], 2 * math.pi)
+    doubt |= (wrapped < GUARD) | (wrapped > 2 * math.pi - GUARD)
+    q1 = f.q_lower[0] + wrapped
+    inside = np.abs(cc) <= 1.0
+    for q, a, b in ((q1, f.q_lower[0], f.q_upper[0]), (q2, f.q_lower[1], f.q_upper[1])):
+        for lo_q, hi_q in ((a, b), (a + margin, b - margin)):  # ik's own test, then margin's
+            inside &= (lo_q <= q) & (q <= hi_q)
+            doubt |= (np.abs(q - lo_q) < GUARD) | (np.abs(q - hi_q) < GUARD)
+    unsure[k[doubt]] = True
+    look = np.flatnonzero(inside & ~doubt)
+    if len(look):
+        q1, q2, k = q1[look], q2[look], k[look]
+        gap = model.joint_gaps(finger, q1, q2, pose)
+        doubt = np.abs(gap - model.clearance) < GUARD
+        ex, ez = f.base_x + f.l1 * np.cos(q1), f.base_z + f.l1 * np.sin(q1)
+        tip = (ex + f.l2 * np.cos(q1 + q2), ez + f.l2 * np.sin(q1 + q2))
+        for x, z in ((ex, ez), tip):  # joint_gaps' "below the palm" test: elbow and tip
+            doubt |= (np.abs(z - f.base_z) < GUARD) | (np.abs(x - model.palm_x[0]) < GUARD) | (
+                np.abs(x - model.palm_x[1]) < GUARD)
+        found[k[(gap >= model.clearance) & ~doubt]] = True
+        unsure[k[doubt]] = True
+    for j in np.flatnonzero(unsure & ~found):
+        found[j] = _touches(model, finger, face, pose, float(coords[j]), margin)
+    return [float(v) for v in coords[found]]
+
+
+def _touches(model: HandModel, finger: int, face: Face, pose: np.ndarray, coord: float,
+             margin: float) -> bool:
+    """``face_coords``' test of one coordinate, in plain floats (the reference)."""
+    r = model.tip_radius
+    f = model.fingers[finger]
+    point, inward = model.shape.local_contact(face, coord)
+    target = pose[:2] + rotation(pose[2]) @ (point - r * inward)
+    for elbow in (1, -1):
+        qi = f.ik(target, elbow)
+        if (qi is not None and f.within_limits(qi, margin)
+                and model.finger_gap(finger, qi, pose) >= model.clearance):
+            return True
+    return False
 
 
 def lone_finger(posture: Posture) -> int:

@@ -8,6 +8,7 @@
     inhand-bench flips [--trials N] [--seed S] [overrides...]
     inhand-bench load [--minutes M] [--workers W] [overrides...]
     inhand-bench torques [--trials N] [--actions N] [--seed S] [overrides...]
+    inhand-bench goals [--pairs N] [--seed S] [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -176,7 +177,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("what", choices=("speed", "primitives", "env", "graph", "load",
-                                         "flips", "torques"))
+                                         "flips", "torques", "goals"))
     parser.add_argument("--minutes", type=float, default=30.0, help="load: how long")
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
@@ -188,6 +189,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--actions", type=int, default=200,
                         help="torques: random mid-level actions whose torques are recorded")
     parser.add_argument("--only", default="", help="comma-separated sections")
+    parser.add_argument("--pairs", type=int, default=20, help="goals: pairs drawn per group")
     parser.add_argument("--seconds", type=float, default=5.0, help="speed: loop timing budget")
     parser.add_argument("--primitive-runs", type=int, default=5,
                         help="speed: runs per primitive for the wall time")
@@ -195,6 +197,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_intermixed_args(argv)
     if args.trials is not None and args.trials <= 0:
         parser.error(f"--trials must be > 0, got {args.trials}")
+    if args.pairs <= 0:
+        parser.error(f"--pairs must be > 0, got {args.pairs}")
     learner = {"graph": ["learner=search", "mode=eval"],
                "torques": ["learner=ddpg", "mode=train"]}.get(args.what, [])
     try:
@@ -219,6 +223,11 @@ def main(argv: list[str] | None = None) -> None:
         from inhand_exp.bench.graph import graph_size
 
         result = graph_size(cfg, seed=args.seed)
+    elif args.what == "goals":
+        from inhand_exp.bench.goal_draws import draw_times
+
+        raw, _ = hold_rates(cfg, 2.0, args.seed)
+        result = draw_times(cfg, args.pairs, args.seed, raw)
     elif args.what == "env":
         from inhand_exp.bench.throughput import env_throughput
 

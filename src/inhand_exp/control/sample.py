@@ -153,9 +153,11 @@ def grasp_of(model: HandModel, posture: Posture, pose: np.ndarray,
     """
     if model.palm_gap(pose) < model.clearance:
         return None
-    sets = [face_coords(model, i, f, pose, margin=margin) for i, f in enumerate(posture.faces)]
-    if not all(sets):
-        return None
+    sets = []
+    for i, face in enumerate(posture.faces):  # a finger that reaches nowhere ends the search
+        sets.append(face_coords(model, i, face, pose, margin=margin))
+        if not sets[-1]:
+            return None
     faces = posture.faces
     lone = [i for i in range(3) if faces.count(faces[i]) == 1]
     if lone_min is not None and lone:

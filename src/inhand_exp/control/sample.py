@@ -84,21 +84,7 @@ def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
     if not len(near):
         return []
     found, unsure = np.zeros(len(coords), dtype=bool), np.zeros(len(coords), dtype=bool)
-    # both branches at once: the first half elbow +1 (q2 > 0), the second -1, as ``ik``
-    k = np.concatenate([near, near])
-    elbow = np.repeat([1.0, -1.0], len(near))
-    cc = c2[k]
-    doubt = np.abs(np.abs(cc) - 1.0) < 1e-6  # acos is steep there: a wide band
-    q2 = elbow * np.arccos(np.clip(cc, -1.0, 1.0))
-    q1 = np.arctan2(dz[k], dx[k]) - np.arctan2(f.l2 * np.sin(q2), f.l1 + f.l2 * cc)
-    wrapped = np.mod(q1 - f.q_lower[0], 2 * math.pi)
-    doubt |= (wrapped < GUARD) | (wrapped > 2 * math.pi - GUARD)
-    q1 = f.q_lower[0] + wrapped
-    inside = np.abs(cc) <= 1.0
-    for q, a, b in ((q1, f.q_lower[0], f.q_upper[0]), (q2, f.q_lower[1], f.q_upper[1])):
-        for lo_q, hi_q in ((a, b), (a + margin, b - margin)):  # ik's own test, then margin's
-            inside &= (lo_q <= q) & (q <= hi_q)
-            doubt |= (np.abs(q - lo_q) < GUARD) | (np.abs(q - hi_q) < GUARD)
+    k, q1, q2, inside, doubt = _branches(f, dx, dz, c2, near, margin)
     unsure[k[doubt]] = True
     look = np.flatnonzero(inside & ~doubt)
     if len(look):
@@ -115,6 +101,29 @@ def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
     for j in np.flatnonzero(unsure & ~found):
         found[j] = _touches(model, finger, face, pose, float(coords[j]), margin)
     return [float(v) for v in coords[found]]
+
+
+def _branches(f, dx: np.ndarray, dz: np.ndarray, c2: np.ndarray, near: np.ndarray,
+              margin: float) -> tuple[np.ndarray, ...]:
+    """``FingerModel.ik`` of both elbow branches for the targets ``near`` (tip offsets
+    ``dx, dz`` from the base, ``c2`` the cosine of the elbow angle): the target of each row,
+    its joint angles, whether they reach inside the limits less ``margin``, and whether a test
+    came within ``GUARD`` of its threshold. The first half is elbow +1 (q2 > 0), as ``ik``."""
+    k = np.concatenate([near, near])
+    elbow = np.repeat([1.0, -1.0], len(near))
+    cc = c2[k]
+    doubt = np.abs(np.abs(cc) - 1.0) < 1e-6  # acos is steep there: a wide band
+    q2 = elbow * np.arccos(np.clip(cc, -1.0, 1.0))
+    q1 = np.arctan2(dz[k], dx[k]) - np.arctan2(f.l2 * np.sin(q2), f.l1 + f.l2 * cc)
+    wrapped = np.mod(q1 - f.q_lower[0], 2 * math.pi)
+    doubt |= (wrapped < GUARD) | (wrapped > 2 * math.pi - GUARD)
+    q1 = f.q_lower[0] + wrapped
+    inside = np.abs(cc) <= 1.0
+    for q, a, b in ((q1, f.q_lower[0], f.q_upper[0]), (q2, f.q_lower[1], f.q_upper[1])):
+        for lo_q, hi_q in ((a, b), (a + margin, b - margin)):  # ik's own test, then margin's
+            inside &= (lo_q <= q) & (q <= hi_q)
+            doubt |= (np.abs(q - lo_q) < GUARD) | (np.abs(q - hi_q) < GUARD)
+    return k, q1, q2, inside, doubt
 
 
 def _touches(model: HandModel, finger: int, face: Face, pose: np.ndarray, coord: float,

@@ -129,14 +129,20 @@ class HandModel:
         """``finger_gap`` for many joint angles ``Q`` (n, 2) of finger ``i`` at once."""
         return self.joint_gaps(i, Q[:, 0], Q[:, 1], pose)
 
+    def elbow_tip(self, i: int, q1: np.ndarray, q2: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Elbow and tip centre ``(ex, ez, tx, tz)`` of finger ``i`` for arrays of joint
+        angles that broadcast together."""
+        f = self.fingers[i]
+        ex, ez = f.base_x + f.l1 * np.cos(q1), f.base_z + f.l1 * np.sin(q1)
+        q12 = q1 + q2
+        return ex, ez, ex + f.l2 * np.cos(q12), ez + f.l2 * np.sin(q12)
+
     def joint_gaps(self, i: int, q1: np.ndarray, q2: np.ndarray, pose: np.ndarray
                    ) -> np.ndarray:
         """``finger_gap`` for arrays of first and second joint angles that broadcast
         together. A grid (``q1`` a column, ``q2`` a row) checks each proximal link once."""
         f = self.fingers[i]
-        q12 = q1 + q2
-        ex, ez = f.base_x + f.l1 * np.cos(q1), f.base_z + f.l1 * np.sin(q1)
-        tx, tz = ex + f.l2 * np.cos(q12), ez + f.l2 * np.sin(q12)
+        ex, ez, tx, tz = self.elbow_tip(i, q1, q2)
         lo, hi = self.palm_x
         below = ((lo <= ex) & (ex <= hi) & (ez < f.base_z)) | \
                 ((lo <= tx) & (tx <= hi) & (tz < f.base_z))

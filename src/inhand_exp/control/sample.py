@@ -91,9 +91,8 @@ def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
         q1, q2, k = q1[look], q2[look], k[look]
         gap = model.joint_gaps(finger, q1, q2, pose)
         doubt = np.abs(gap - model.clearance) < GUARD
-        ex, ez = f.base_x + f.l1 * np.cos(q1), f.base_z + f.l1 * np.sin(q1)
-        tip = (ex + f.l2 * np.cos(q1 + q2), ez + f.l2 * np.sin(q1 + q2))
-        for x, z in ((ex, ez), tip):  # joint_gaps' "below the palm" test: elbow and tip
+        ex, ez, tx, tz = model.elbow_tip(finger, q1, q2)
+        for x, z in ((ex, ez), (tx, tz)):  # joint_gaps' "below the palm" test: elbow and tip
             doubt |= (np.abs(z - f.base_z) < GUARD) | (np.abs(x - model.palm_x[0]) < GUARD) | (
                 np.abs(x - model.palm_x[1]) < GUARD)
         found[k[(gap >= model.clearance) & ~doubt]] = True
@@ -106,9 +105,10 @@ def face_coords(model: HandModel, finger: int, face: Face, pose: np.ndarray,
 def _branches(f, dx: np.ndarray, dz: np.ndarray, c2: np.ndarray, near: np.ndarray,
               margin: float) -> tuple[np.ndarray, ...]:
     """``FingerModel.ik`` of both elbow branches for the targets ``near`` (tip offsets
-    ``dx, dz`` from the base, ``c2`` the cosine of the elbow angle): the target of each row,
-    its joint angles, whether they reach inside the limits less ``margin``, and whether a test
-    came within ``GUARD`` of its threshold. The first half is elbow +1 (q2 > 0), as ``ik``."""
+    ``dx, dz`` from the base, ``c2`` the cosine of the elbow angle): the coordinate index of
+    each row, its joint angles, whether they reach inside the limits less ``margin``, and
+    whether a test came within ``GUARD`` of its threshold. The first half is elbow +1
+    (q2 > 0), as ``ik``."""
     k = np.concatenate([near, near])
     elbow = np.repeat([1.0, -1.0], len(near))
     cc = c2[k]

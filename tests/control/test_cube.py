@@ -71,15 +71,24 @@ def test_random_cube_grasp_holds_and_reposes(cube_model, cube_world, seed):
 
 
 @pytest.mark.parametrize("seed", [10, 11, 12])
-def test_release_then_land(cube_model, cube_world, seed):
-    contacts, finger, release = releasable(cube_model, cube_world, seed)
-    start = cube_world.object_pose()
-    out = execute(cube_world, release)
-    assert out.reason == "done", out
-    assert touching(cube_world) == {0, 1, 2} - {finger}  # lifted off, the pair holds
-    assert np.hypot(*(cube_world.object_pose() - start)[:2]) < 3e-3
-    land = Land(cube_model, release.result, finger, 1.5)
-    assert land.start(observe(cube_world)) is None
+def test_release_then_land_on_another_face(cube_model, cube_world, seed):
+    """Released grasps (seeds from ``seed`` on) until one has a landing: it puts the finger on
+    another face than the one it left, and the three fingers then hold the cube."""
+    for s in range(seed, seed + 8):
+        contacts, finger, release = releasable(cube_model, cube_world, s)
+        start = cube_world.object_pose()
+        out = execute(cube_world, release)
+        assert out.reason == "done", out
+        assert touching(cube_world) == {0, 1, 2} - {finger}  # lifted off, the pair holds
+        assert np.hypot(*(cube_world.object_pose() - start)[:2]) < 3e-3
+        land = Land(cube_model, release.result, finger, 1.5)
+        refused = land.start(observe(cube_world))
+        if refused is None:
+            break
+        assert "no reachable landing" in refused
+    else:
+        pytest.fail("no landing found after 8 releases")
+    assert land.face != contacts.posture.faces[finger]  # a new side: the second half of a flip
     out = execute(cube_world, land)
     assert out.reason == "done", out
     assert touching(cube_world) == {0, 1, 2}

@@ -16,7 +16,7 @@ from omegaconf import DictConfig
 from inhand_exp.config import NoiseConfig, PerturbConfig
 from inhand_exp.control.execute import Observation, execute
 from inhand_exp.control.flip import Flip
-from inhand_exp.control.grasp import Contacts, rotation
+from inhand_exp.control.grasp import Contacts, face_axes, rotation
 from inhand_exp.control.hand import GeometryError
 from inhand_exp.control.release_land import Land, Release
 from inhand_exp.control.repose import Repose
@@ -216,7 +216,8 @@ def release(b: Bench, rng: np.random.Generator) -> Trial | None:
 
 
 def land(b: Bench, rng: np.random.Generator) -> Trial | None:
-    """Land after a successful release (the release itself is not scored here)."""
+    """Land on another face after a successful release (the release itself is not scored
+    here)."""
     found = _releasable(b, rng)
     if found is None or not execute(b.world, found[1]).ok:
         return None
@@ -227,7 +228,12 @@ def land(b: Bench, rng: np.random.Generator) -> Trial | None:
     start = b.world.object_pose()
     t = time.perf_counter()
     out = execute(b.world, prim, b.offset(rng))
-    em, er = _pose_error(b.world.object_pose(), start)
-    ok = out.ok and len(b.faces()) == 3
+    pose = b.world.object_pose()
+    em, er = _pose_error(pose, start)
+    # the landed finger pushes on its new face (PyBullet's contact normal), the others hold on
+    inward = rotation(pose[2]) @ face_axes(prim.face)[0]
+    on_face = any(c.finger == finger and float(c.normal @ inward) > 0.95
+                  for c in b.world.contacts())
+    ok = out.ok and len(b.faces()) == 3 and on_face
     return Trial(ok, out.dropped, em, er, out.sim_time_s,
                  time.perf_counter() - t)

@@ -2,9 +2,13 @@
 
 Release hands one finger's load to the other two (which must push from opposite faces), then
 lifts the tip clear of its face. Land carries a free tip round the object, outside it, to the
-nearest face and coordinate where the three fingers then hold the object with a squeeze strictly
-inside the friction cones, touches down and hands part of the load back. The object is held at
-its start pose throughout.
+nearest place on another face (the second half of a flip, which puts a finger on a new side)
+where the three fingers then hold the object with a squeeze strictly inside the friction cones,
+touches down and hands part of the load back. The object is held at its start pose throughout.
+
+Landing on the face the finger left would undo the release: its nearest place is the one the
+tip was just lifted from, so no sequence of releases and lands could change the posture, and
+goals that only another posture holds (a quarter turn of the cube) would be out of reach.
 """
 
 from __future__ import annotations
@@ -72,10 +76,10 @@ class Release:
 
 
 class Land:
-    """Primitive: put the free ``finger`` down where the three fingers hold the object best.
+    """Primitive: put the free ``finger`` down on another face than the one it left.
 
-    Candidates are every face and coordinate (5 mm apart); the nearest by path length whose
-    grasp admits a strict squeeze and whose path is reachable wins.
+    Candidates are every coordinate (5 mm apart) of the other faces; the nearest by path
+    length whose grasp admits a strict squeeze and whose path is reachable wins.
     """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
@@ -116,14 +120,16 @@ class Land:
         return f"no reachable landing holds the object for finger {i}"
 
     def _candidates(self, tip_O: np.ndarray):
-        """(path length, face, coordinate, path) for every landing, shortest first."""
+        """(path length, face, coordinate, path) for every landing off the face the finger
+        left, shortest first."""
         shape, r = self.model.shape, self.model.tip_radius
         hx, hz = shape.half_x, shape.half_z
         gap = r + self.clearance
         # the face the free tip is off: the one whose outward distance is largest
         here = max(Face, key=lambda f: float(-face_axes(f)[0] @ tip_O) - shape.depth(f))
+        left = self.contacts.posture.faces[self.finger]  # the face it was released from
         out = []
-        for face in Face:
+        for face in (f for f in Face if f != left):
             n = int((shape.half_extent(face) - 2 * r) // self.step)
             for k in range(-n, n + 1):
                 coord = k * self.step

@@ -125,3 +125,18 @@ def test_primitive_gains_come_from_the_config():
                                        "primitives.friction_margin=0.7"]))
     assert (bench.prim.kp, bench.prim.min_normal_force_n, bench.prim.friction_margin) == (
         100, 0.2, 0.7)
+
+
+def test_reach_splits_the_cube_goals_by_posture(capsys):
+    """The cube study's start; the goals its posture holds and the others, each with how many
+    the search reaches."""
+    main(["reach", "--object", "cube", "--pairs", "4", "goals=hard",
+          "goals.hard_goal_posture=any", "goals.x0=[0.0,0.25,0.0]"])
+    out = last_json(capsys)
+    assert sum(out["goals"].values()) == out["pairs"] == 4
+    for k, n in out["goals"].items():
+        assert 0 <= out["reached"][k] <= n
+    lo, hi = out["angles_rad"]
+    assert lo < 0.0 < hi and out["three_finger_states"] <= out["states"]
+    with pytest.raises(SystemExit, match="set goals.x0"):
+        main(["reach", "--object", "cube"])

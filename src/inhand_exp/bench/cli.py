@@ -9,6 +9,7 @@
     inhand-bench load [--minutes M] [--workers W] [overrides...]
     inhand-bench torques [--trials N] [--actions N] [--seed S] [overrides...]
     inhand-bench goals [--pairs N] [--seed S] [overrides...]
+    inhand-bench reach --object cube [--pairs N] [--run EVAL_DIR] [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -177,7 +178,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("what", choices=("speed", "primitives", "env", "graph", "load",
-                                         "flips", "torques", "goals"))
+                                         "flips", "torques", "goals", "reach"))
     parser.add_argument("--minutes", type=float, default=30.0, help="load: how long")
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
@@ -189,7 +190,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--actions", type=int, default=200,
                         help="torques: random mid-level actions whose torques are recorded")
     parser.add_argument("--only", default="", help="comma-separated sections")
-    parser.add_argument("--pairs", type=int, default=20, help="goals: pairs drawn per group")
+    parser.add_argument("--pairs", type=int, default=20,
+                        help="goals: pairs drawn per group; reach: test pairs checked")
+    parser.add_argument("--run", default=None,
+                        help="reach: evaluation logs of the same goals, split by reach")
     parser.add_argument("--seconds", type=float, default=5.0, help="speed: loop timing budget")
     parser.add_argument("--primitive-runs", type=int, default=5,
                         help="speed: runs per primitive for the wall time")
@@ -228,6 +232,13 @@ def main(argv: list[str] | None = None) -> None:
 
         raw, _ = hold_rates(cfg, 2.0, args.seed)
         result = draw_times(cfg, args.pairs, args.seed, raw)
+    elif args.what == "reach":
+        from inhand_exp.bench.reach import goal_reach
+
+        try:
+            result = goal_reach(cfg, args.pairs, run=args.run)
+        except ConfigError as err:
+            sys.exit(f"inhand-bench: {err}")
     elif args.what == "env":
         from inhand_exp.bench.throughput import env_throughput
 

@@ -62,3 +62,14 @@ def test_goals_outside_the_lattice_angles_are_not_reached(reach):
 def test_resolutions_must_be_positive(model):
     with pytest.raises(ValueError, match="resolution_rad must be > 0"):
         Reach.lattice(model, PrimitivesConfig(), 0.0, (0.2, 0.3), (-1, 1), 0.02, 0.0)
+
+
+def test_adjacent_pairs_carry_the_cube_only_when_asked(model):
+    """Bottom and right hold the upright cube still by their forces (the bottom tip bears the
+    weight); only ``opposite_only=False`` lets them carry it, and two tips on one face never."""
+    args = (model, PrimitivesConfig(), 0.0, (0.23, 0.27), (-0.3, 0.3), 0.02, 0.1)
+    strict, loose = Reach.lattice(*args), Reach.lattice(*args, opposite_only=False)
+    cell = strict.cell(UPRIGHT)
+    assert not strict.held((LBR, 0, *cell)) and loose.held((LBR, 0, *cell))
+    same = Posture((Face.BOTTOM, Face.BOTTOM, Face.RIGHT))
+    assert not loose.held((same, 2, *cell))

@@ -3,8 +3,9 @@
 The run's own goal set (the first ``pairs`` test pairs of its ``goals`` group, from the one
 start ``goals.x0``) is split into the goals the start's posture holds and the ones only another
 posture holds; for each, how many goal cells the breadth-first search over reposes, releases
-and lands reaches. With ``run`` (a directory of evaluation logs of that goal set) the episodes'
-success and drop rates are split the same way.
+and lands reaches (``opposite_only=False``: were a pair on adjacent faces allowed to carry the
+cube, see ``task.reach``). With ``run`` (a directory of evaluation logs of that goal set) the
+episodes' success and drop rates are split the same way.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from inhand_exp.task.scene import build_scene
 
 
 def goal_reach(cfg: DictConfig, pairs: int, resolution_m: float = 0.02,
-               resolution_rad: float = 0.1, run: str | None = None) -> dict:
+               resolution_rad: float = 0.1, run: str | None = None,
+               opposite_only: bool = True) -> dict:
     """The figures as a dict; prints a summary."""
     if cfg.goals.get("x0") is None:
         raise ConfigError("inhand-bench reach searches from one start: set goals.x0 "
@@ -35,7 +37,8 @@ def goal_reach(cfg: DictConfig, pairs: int, resolution_m: float = 0.02,
     ws = Workspace.from_config(cfg.task)
     x0, start = goals[0].x0, goals[0].contacts
     reach = Reach.lattice(scene.model, cfg.primitives, x0[0], (ws.low[1], ws.high[1]),
-                          (ws.low[2], ws.high[2]), resolution_m, resolution_rad)
+                          (ws.low[2], ws.high[2]), resolution_m, resolution_rad,
+                          opposite_only=opposite_only)
     t = time.perf_counter()
     reach.search(x0, start)
     build_s = time.perf_counter() - t
@@ -44,13 +47,15 @@ def goal_reach(cfg: DictConfig, pairs: int, resolution_m: float = 0.02,
     hit = {k: sum(reach.goal_reached(p.xg) for p in v) for k, v in split.items()}
     lo, hi = reach.angles()
     three = sum(lifted < 0 for _, lifted, _, _ in reach.reached)
+    rule = "opposite faces" if opposite_only else "any pair that holds it"
+    print(f"pairs carry the object from {rule}")
     print(f"lattice {len(reach.zs)} heights x {len(reach.ts)} angles at x = {x0[0]:.3f} m "
           f"({resolution_m} m, {resolution_rad} rad); {len(reach.reached)} states reached "
           f"({three} with three fingers) in {build_s:.1f} s, angles {lo:+.2f} to {hi:+.2f} rad")
     for k, v in split.items():
         print(f"{k:14s} {len(v):4d} goals, {hit[k]:4d} reached")
-    out = {"pairs": len(goals), "states": len(reach.reached), "three_finger_states": three,
-           "build_s": build_s, "angles_rad": [lo, hi],
+    out = {"pairs": len(goals), "opposite_only": opposite_only, "states": len(reach.reached),
+           "three_finger_states": three, "build_s": build_s, "angles_rad": [lo, hi],
            "goals": {k: len(v) for k, v in split.items()}, "reached": hit}
     if run is not None:
         out["episodes"] = _episodes_split(run, goals, reach)

@@ -15,6 +15,11 @@ Edges: a repose to a neighbouring cell (height or angle) held by the same finger
 of a finger whose two partners hold alone; a land of the free finger on any other face where
 the three then hold. The search is breadth-first and checks only the cells it visits.
 
+``opposite_only=False`` asks what the action set would reach if any pair whose force
+distribution holds the object still could carry it, two fingers on adjacent faces included
+(a cube resting on a bottom finger and pressed by a side one). The primitives and the drop
+test (``World.grasp_lost``: two fingertips pushing from opposite sides) do not allow that today.
+
 It is a diagnostic, not a filter: a cell stands for every pose within half a cell of it, the
 object stays at the start's x, and a land may use any coordinate of its new face (the
 primitive takes the nearest that holds). A goal is counted as reached when some posture that
@@ -51,6 +56,7 @@ class Reach:
     ts: np.ndarray
     tries: int = 20
     pair_tries: int = 15
+    opposite_only: bool = True  # a pair carries the object only from opposite faces
     reached: set[State] = field(default_factory=set)
     _held: dict[State, bool] = field(default_factory=dict)
 
@@ -94,8 +100,10 @@ class Reach:
 
     def _pair_holds(self, posture: Posture, lifted: int, pose: np.ndarray) -> bool:
         a, b = (j for j in range(3) if j != lifted)
-        if posture.faces[a] != OPPOSITE[posture.faces[b]]:
+        if self.opposite_only and posture.faces[a] != OPPOSITE[posture.faces[b]]:
             return False
+        if posture.faces[a] == posture.faces[b]:
+            return False  # two tips on one face hold nothing still
         if self.model.palm_gap(pose) < self.model.clearance:
             return False
         sets = [face_coords(self.model, j, posture.faces[j], pose, margin=0.1) for j in (a, b)]

@@ -102,7 +102,7 @@ def test_release_then_land_on_another_face(cube_model, cube_world, seed):
     assert hold.reason == "done", hold
 
 
-def test_release_needs_an_opposing_pair(cube_model, cube_world):
+def test_release_needs_a_pair_on_two_faces(cube_model, cube_world):
     # fingers 1 and 2 both on the bottom face cannot hold the cube without finger 0; the
     # cube sits high enough for both to reach under it with their links clear
     contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.BOTTOM)), (0.0, -0.02, 0.02))
@@ -110,7 +110,7 @@ def test_release_needs_an_opposing_pair(cube_model, cube_world):
     cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
     out = execute(cube_world, Release(cube_model, contacts, 0, 1.0))
     assert out.reason == "infeasible" and out.steps == 0
-    assert "do not oppose" in out.detail
+    assert "on one face" in out.detail
 
 
 def test_land_refuses_a_finger_in_contact(cube_model, cube_world):

@@ -25,7 +25,8 @@ def model() -> HandModel:
 def reach(model) -> Reach:
     start = grasp_of(model, LBR, UPRIGHT)
     assert start is not None
-    r = Reach.lattice(model, PrimitivesConfig(), 0.0, (0.23, 0.27), (-0.3, 0.3), 0.02, 0.1)
+    r = Reach.lattice(model, PrimitivesConfig(), 0.0, (0.23, 0.27), (-0.3, 0.3), 0.02, 0.1,
+                      opposite_only=True)
     return r.search(UPRIGHT, start)
 
 
@@ -64,11 +65,11 @@ def test_resolutions_must_be_positive(model):
         Reach.lattice(model, PrimitivesConfig(), 0.0, (0.2, 0.3), (-1, 1), 0.02, 0.0)
 
 
-def test_adjacent_pairs_carry_the_cube_only_when_asked(model):
+def test_adjacent_pairs_carry_the_cube_unless_opposite_only(model):
     """Bottom and right hold the upright cube still by their forces (the bottom tip bears the
-    weight); only ``opposite_only=False`` lets them carry it, and two tips on one face never."""
+    weight): they carry it unless ``opposite_only``; two tips on one face never do."""
     args = (model, PrimitivesConfig(), 0.0, (0.23, 0.27), (-0.3, 0.3), 0.02, 0.1)
-    strict, loose = Reach.lattice(*args), Reach.lattice(*args, opposite_only=False)
+    strict, loose = Reach.lattice(*args, opposite_only=True), Reach.lattice(*args)
     cell = strict.cell(UPRIGHT)
     assert not strict.held((LBR, 0, *cell)) and loose.held((LBR, 0, *cell))
     same = Posture((Face.BOTTOM, Face.BOTTOM, Face.RIGHT))

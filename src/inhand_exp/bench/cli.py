@@ -9,7 +9,7 @@
     inhand-bench load [--minutes M] [--workers W] [overrides...]
     inhand-bench torques [--trials N] [--actions N] [--seed S] [overrides...]
     inhand-bench goals [--pairs N] [--seed S] [overrides...]
-    inhand-bench reach --object cube [--pairs N] [--run EVAL_DIR] [--any-pair] [overrides...]
+    inhand-bench reach --object cube [--pairs N] [--run EVAL_DIR] [--opposite-only] [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -194,8 +194,8 @@ def main(argv: list[str] | None = None) -> None:
                         help="goals: pairs drawn per group; reach: test pairs checked")
     parser.add_argument("--run", default=None,
                         help="reach: evaluation logs of the same goals, split by reach")
-    parser.add_argument("--any-pair", action="store_true",
-                        help="reach: let two fingers on adjacent faces carry the cube")
+    parser.add_argument("--opposite-only", action="store_true",
+                        help="reach: only two fingers on opposite faces carry the cube")
     parser.add_argument("--seconds", type=float, default=5.0, help="speed: loop timing budget")
     parser.add_argument("--primitive-runs", type=int, default=5,
                         help="speed: runs per primitive for the wall time")
@@ -239,7 +239,7 @@ def main(argv: list[str] | None = None) -> None:
 
         try:
             result = goal_reach(cfg, args.pairs, run=args.run,
-                                opposite_only=not args.any_pair)
+                                opposite_only=args.opposite_only)
         except ConfigError as err:
             sys.exit(f"inhand-bench: {err}")
     elif args.what == "env":

@@ -3,7 +3,7 @@
 The run's own goal set (the first ``pairs`` test pairs of its ``goals`` group, from the one
 start ``goals.x0``) is split into the goals the start's posture holds and the ones only another
 posture holds; for each, how many goal cells the breadth-first search over reposes, releases
-and lands reaches (``opposite_only=False``: were a pair on adjacent faces allowed to carry the
+and lands reaches (``opposite_only``: were only pairs on opposite faces allowed to carry the
 cube, see ``task.reach``). With ``run`` (a directory of evaluation logs of that goal set) the
 episodes' success and drop rates are split the same way.
 """
@@ -23,7 +23,7 @@ from inhand_exp.task.scene import build_scene
 
 def goal_reach(cfg: DictConfig, pairs: int, resolution_m: float = 0.02,
                resolution_rad: float = 0.1, run: str | None = None,
-               opposite_only: bool = True) -> dict:
+               opposite_only: bool = False) -> dict:
     """The figures as a dict; prints a summary."""
     if cfg.goals.get("x0") is None:
         raise ConfigError("inhand-bench reach searches from one start: set goals.x0 "
@@ -47,7 +47,7 @@ def goal_reach(cfg: DictConfig, pairs: int, resolution_m: float = 0.02,
     hit = {k: sum(reach.goal_reached(p.xg) for p in v) for k, v in split.items()}
     lo, hi = reach.angles()
     three = sum(lifted < 0 for _, lifted, _, _ in reach.reached)
-    rule = "opposite faces" if opposite_only else "any pair that holds it"
+    rule = "opposite faces only" if opposite_only else "any two faces whose forces hold it"
     print(f"pairs carry the object from {rule}")
     print(f"lattice {len(reach.zs)} heights x {len(reach.ts)} angles at x = {x0[0]:.3f} m "
           f"({resolution_m} m, {resolution_rad} rad); {len(reach.reached)} states reached "

@@ -34,6 +34,7 @@ from inhand_exp.control.repose import (
     push_torque,
     strict_hold,
 )
+from inhand_exp.control.sample import elongated
 
 OPPOSITE = {Face.TOP: Face.BOTTOM, Face.BOTTOM: Face.TOP,
             Face.LEFT: Face.RIGHT, Face.RIGHT: Face.LEFT}
@@ -52,12 +53,18 @@ def phase_times(duration_s: float, phases: dict[str, float]) -> dict[str, tuple[
 
 def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: PrimitivesConfig
                ) -> tuple[GraspPlan, GraspPlan] | str:
-    """Plans with and without ``finger``, or why the other two cannot hold the object alone."""
+    """Plans with and without ``finger``, or why the other two cannot hold the object alone.
+
+    The two must be on different faces: opposite ones for a pole (a pole with one long side
+    bare is dropped), any two for a cube (adjacent faces too: a bottom tip can bear the weight
+    while a side tip presses). Their force distribution decides the rest."""
     others = [j for j in range(3) if j != finger]
     if not all(contacts.active[j] for j in others):
         return f"fingers {others} must both be in contact"
     faces = [contacts.posture.faces[j] for j in others]
-    if faces[0] != OPPOSITE[faces[1]]:
+    if faces[0] == faces[1]:
+        return f"fingers {others} are on one face"
+    if elongated(model) and faces[0] != OPPOSITE[faces[1]]:
         return f"fingers {others} do not oppose each other"
     full = plan_for(model, contacts, obs, gains)
     pair = plan_for(model, contacts.moved(finger, active=False), obs, gains)

@@ -62,6 +62,20 @@ class ObjectSpec:
         """Moment of inertia about the axis normal to the plane through the COM (kg m^2)."""
         return self.mass_kg * (self.length_m**2 + self.width_m**2) / 12
 
+    @property
+    def elongated(self) -> bool:
+        """A pole, held on its two long sides (the test of ``control.sample.elongated``)."""
+        return self.length_m > 2 * self.width_m
+
+    @property
+    def hold_cos(self) -> float:
+        """Two fingertips hold the object when their inward normals are further apart than
+        this cosine: opposite sides for a pole (more than 120 deg, as the paper's "no contact on
+        one of the sides" is a drop), and for a cube also two adjacent faces (more than 60
+        deg: a bottom tip bearing the weight and a side tip pressing it), which only two tips on
+        one face are not."""
+        return -0.5 if self.elongated else 0.5
+
 
 @dataclass(frozen=True)
 class Contact:
@@ -262,8 +276,9 @@ class World:
     def grasp_lost(self) -> str | None:
         """Why the object is not held, judged from PyBullet's contact points, or None if held.
 
-        Held means at least two fingertips touch the object and two of them push from opposite
-        sides (inward normals more than 120 deg apart).
+        Held means at least two fingertips touch the object and two of them push from different
+        sides (``ObjectSpec.hold_cos``: opposite sides of a pole, also adjacent faces of a cube).
+        A held object that falls all the same is caught by the primitives' course test.
         """
         # plain floats, no Contact objects: this runs every few steps of every primitive
         fingers, normals = set(), []
@@ -274,9 +289,11 @@ class World:
             normals.append((nx / norm, nz / norm))
         if len(fingers) < 2:
             return f"only {len(fingers)} fingertip(s) in contact"
-        if not any(ax * bx + az * bz < -0.5 for i, (ax, az) in enumerate(normals)
+        cos = self.obj.hold_cos
+        if not any(ax * bx + az * bz < cos for i, (ax, az) in enumerate(normals)
                    for bx, bz in normals[i + 1:]):
-            return "object not held from opposite sides"
+            return "object not held from two sides" if cos > 0 else \
+                "object not held from opposite sides"
         return None
 
     def unstable(self) -> str | None:

@@ -6,19 +6,18 @@ posture (the face of each finger), the finger lifted off the object if any, and 
 
 - held by three fingers when some grasp of the posture holds the object there
   (``sample.grasp_of``: reach, joint limits, links and palm clear, a strict squeeze);
-- held by two when those two are on opposite faces, each reaches its face there
+- held by two when those two are on different faces, each reaches its face there
   (``sample.face_coords``) and, for some pair of those coordinates, their force distribution
   holds the object still against gravity at that angle (what ``Release`` and ``Land`` ask of
-  the pair, ``flip.pair_holds``).
+  the pair, ``flip.pair_holds``; adjacent faces included: a bottom tip bearing the weight and a
+  side tip pressing).
 
 Edges: a repose to a neighbouring cell (height or angle) held by the same fingers; a release
 of a finger whose two partners hold alone; a land of the free finger on any other face where
 the three then hold. The search is breadth-first and checks only the cells it visits.
 
-``opposite_only=False`` asks what the action set would reach if any pair whose force
-distribution holds the object still could carry it, two fingers on adjacent faces included
-(a cube resting on a bottom finger and pressed by a side one). The primitives and the drop
-test (``World.grasp_lost``: two fingertips pushing from opposite sides) do not allow that today.
+``opposite_only=True`` asks what the action set would reach were only pairs on opposite faces
+allowed to carry the object, as for a pole.
 
 It is a diagnostic, not a filter: a cell stands for every pose within half a cell of it, the
 object stays at the start's x, and a land may use any coordinate of its new face (the
@@ -56,7 +55,7 @@ class Reach:
     ts: np.ndarray
     tries: int = 20
     pair_tries: int = 15
-    opposite_only: bool = True  # a pair carries the object only from opposite faces
+    opposite_only: bool = False  # a pair carries the object only from opposite faces
     reached: set[State] = field(default_factory=set)
     _held: dict[State, bool] = field(default_factory=dict)
 

@@ -102,6 +102,33 @@ def test_release_then_land_on_another_face(cube_model, cube_world, seed):
     assert hold.reason == "done", hold
 
 
+def test_two_fingers_on_adjacent_faces_carry_the_cube(cube_model, cube_world):
+    """A release whose staying pair is on adjacent faces (a corner hold): the cube stays put on
+    the two tips, and the drop test counts it held."""
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        pose, contacts, q = random_grasp(cube_model, rng)
+        cube_world.reset(pose, q)
+        for finger in range(3):
+            a, b = (contacts.posture.faces[j] for j in range(3) if j != finger)
+            if {a, b} in ({Face.LEFT, Face.RIGHT}, {Face.TOP, Face.BOTTOM}):
+                continue  # opposite faces: the case every object allows
+            release = Release(cube_model, contacts, finger, 1.0)
+            if release.start(observe(cube_world)) is None:
+                break
+        else:
+            continue
+        break
+    else:
+        pytest.fail("no release onto adjacent faces found in 200 grasps")
+    start = cube_world.object_pose()
+    out = execute(cube_world, release)
+    assert out.reason == "done", out
+    assert touching(cube_world) == {0, 1, 2} - {finger}
+    assert cube_world.grasp_lost() is None
+    assert np.hypot(*(cube_world.object_pose() - start)[:2]) < 3e-3
+
+
 def test_release_needs_a_pair_on_two_faces(cube_model, cube_world):
     # fingers 1 and 2 both on the bottom face cannot hold the cube without finger 0; the
     # cube sits high enough for both to reach under it with their links clear

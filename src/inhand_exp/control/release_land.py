@@ -1,7 +1,8 @@
 """Release and land (cube, paper section IV-D): a flip split into its two halves.
 
-Release hands one finger's load to the other two (which must push from opposite faces), then
-lifts the tip clear of its face. Land carries a free tip round the object, outside it, to the
+Release hands one finger's load to the other two (on two different faces whose forces hold
+the object: opposite ones, or adjacent ones of a cube, ``flip.pair_holds``), then lifts the tip
+clear of its face. Land carries a free tip round the object, outside it, to the
 nearest place on another face (the second half of a flip, which puts a finger on a new side)
 where the three fingers then hold the object with a squeeze strictly inside the friction cones,
 touches down and hands part of the load back. The object is held at its start pose throughout.

@@ -135,7 +135,8 @@ def needs_flip(model: HandModel, posture: Posture, xg: np.ndarray,
 def flip_fingers(model: HandModel, prim) -> tuple[int, ...] | None:
     """The fingers whose flips change a pole's posture in the action set of ``prim``: flip left
     and flip right (fingers 0 and 2, paper Table I), or none without flips. None for other
-    shapes, whose release and land may put a finger on any face (not modelled here)."""
+    shapes, whose release and land put a finger on another face (``task.reach`` searches
+    what they reach, as a diagnostic)."""
     if not elongated(model):
         return None
     return FLIP_FINGERS if prim.flip else ()

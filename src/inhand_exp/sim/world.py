@@ -106,6 +106,7 @@ class World:
         self.dt = sim.timestep_s * self.substeps  # one ``step``: the control period
         self.max_torque = hand.max_torque_nm
         self.obj = obj
+        self._hold_cos = obj.hold_cos  # read by grasp_lost every few steps
         self._cid = pb.connect(pb.DIRECT)
         cid = self._cid
         pb.setGravity(0, 0, -sim.gravity_mps2, physicsClientId=cid)
@@ -289,7 +290,7 @@ class World:
             normals.append((nx / norm, nz / norm))
         if len(fingers) < 2:
             return f"only {len(fingers)} fingertip(s) in contact"
-        cos = self.obj.hold_cos
+        cos = self._hold_cos
         if not any(ax * bx + az * bz < cos for i, (ax, az) in enumerate(normals)
                    for bx, bz in normals[i + 1:]):
             return "object not held from two sides" if cos > 0 else \

@@ -35,10 +35,9 @@ import numpy as np
 
 from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.flip import OPPOSITE
-from inhand_exp.control.forces import Squeeze
-from inhand_exp.control.grasp import Contacts, Face, Posture, contact_frames, grasp_matrix
+from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.repose import object_wrench
+from inhand_exp.control.repose import GraspPlan, object_wrench
 from inhand_exp.control.sample import face_coords, grasp_of
 
 State = tuple[Posture, int, int, int]  # posture, lifted finger (-1: none), height and angle cells
@@ -115,12 +114,9 @@ class Reach:
         for _ in range(self.pair_tries):
             coords = [0.0, 0.0, 0.0]
             coords[a], coords[b] = (float(s[int(rng.integers(len(s)))]) for s in sets)
-            pts, nrm = contact_frames(self.model.shape, Contacts(posture, tuple(coords), active),
-                                      np.zeros(3))
-            squeeze = Squeeze.build(grasp_matrix(pts[[a, b]], nrm[[a, b]]),
-                                    self.model.mu * self.prim.friction_margin,
-                                    self.prim.min_normal_force_n, self.prim.max_normal_force_n)
-            if squeeze.solve(w_O) is not None:
+            plan = GraspPlan.from_contacts(self.model, Contacts(posture, tuple(coords), active),
+                                           self.prim)
+            if plan.squeeze.solve(w_O) is not None:
                 return True
         return False
 

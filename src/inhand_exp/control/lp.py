@@ -104,12 +104,13 @@ class VertexLP:
     TOL = 1e-7  # feasibility tolerance, HiGHS's default primal one
     MAX_DIM = 3
     _COMBOS: dict[tuple[int, int], np.ndarray] = {}
+    _BOUNDS: dict[tuple[int, bytes, bytes], np.ndarray] = {}  # the bounds' rows of C, by pattern
 
     def __init__(self, c: np.ndarray, A_eq: np.ndarray, A_ub: np.ndarray | None,
                  b_ub: np.ndarray | None, lower: np.ndarray, upper: np.ndarray):
         A_eq = np.asarray(A_eq, float)
         r, n = A_eq.shape
-        self.ok = self.fits(A_eq)
+        self.ok = 1 <= n - r <= self.MAX_DIM  # ``fits``
         if not self.ok:
             return
         u, sv, vt = np.linalg.svd(A_eq)
@@ -119,11 +120,11 @@ class VertexLP:
         d = n - r
         lower, upper = np.asarray(lower, float), np.asarray(upper, float)
         lo, hi = np.isfinite(lower), np.isfinite(upper)
-        eye = np.eye(n)
-        C = np.vstack([np.zeros((0, n)) if A_ub is None else np.asarray(A_ub, float),
-                       -eye[lo], eye[hi]])
+        C = self._bound_rows(n, lo, hi)  # -x <= -lower, x <= upper
         self.e = np.concatenate([np.zeros(0) if b_ub is None else np.asarray(b_ub, float),
                                  -lower[lo], upper[hi]])
+        if A_ub is not None:
+            C = np.vstack([np.asarray(A_ub, float), C])
         self.P = (vt[:r].T / sv) @ u.T  # the pseudo-inverse: A_eq P = I
         self.N = vt[r:].T
         self.CP, self.CN = C @ self.P, C @ self.N
@@ -133,22 +134,37 @@ class VertexLP:
             self._COMBOS[key] = np.array(list(itertools.combinations(range(len(C)), d)),
                                          dtype=np.intp).reshape(-1, d)
         combos = self._COMBOS[key]
-        rows = [self.CN[combos[:, t]] for t in range(d)]  # (k, d) each
+        X = self.CN[combos]  # (k, d, d): the rows of each choice
         if d == 1:
-            det, cof = rows[0][:, 0], [np.ones((len(combos), 1))]
+            det, cof = X[:, 0, 0], np.ones((len(combos), 1, 1))
         elif d == 2:
-            (a, b), (c2, d2) = rows[0].T, rows[1].T
-            det = a * d2 - b * c2
-            cof = [np.stack([d2, -c2], 1), np.stack([-b, a], 1)]
+            # the inverse's columns: (d2, -c2) and (-b, a) of the rows (a, b), (c2, d2)
+            det = X[:, 0, 0] * X[:, 1, 1] - X[:, 0, 1] * X[:, 1, 0]
+            cof = X[:, ::-1, ::-1] * _SIGNS2
         else:
-            cof = [_cross(rows[1], rows[2]), _cross(rows[2], rows[0]), _cross(rows[0], rows[1])]
-            det = np.einsum("ij,ij->i", rows[0], cof[0])
-        scale = np.prod([np.abs(m).sum(axis=1) for m in rows], axis=0)
+            r0, r1, r2 = (np.ascontiguousarray(X[:, t]) for t in range(3))
+            cof = np.stack([_cross(r1, r2), _cross(r2, r0), _cross(r0, r1)], axis=1)
+            det = np.einsum("ij,ij->i", r0, cof[:, 0])
+        S = np.abs(X).sum(axis=2)  # (k, d): each row's 1-norm
+        scale = S[:, 0]
+        for t in range(1, d):
+            scale = scale * S[:, t]
         keep = np.abs(det) > 1e-9 * scale
         self.combos = combos[keep]
-        # vertex of a choice = sum over its rows t of rhs[row t] * weights[t]
-        self.weights = [m[keep] / det[keep, None] for m in cof]
+        # vertex of a choice = sum over its rows t of rhs[row t] * weights[:, t]
+        self.weights = cof[keep] / det[keep, None, None]  # (k, d, d)
         self.ok = bool(keep.any())
+
+    @classmethod
+    def _bound_rows(cls, n: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """``-I[lo]`` over ``I[hi]`` (read-only, shared by the LPs of one bounds pattern)."""
+        key = (n, lo.tobytes(), hi.tobytes())
+        rows = cls._BOUNDS.get(key)
+        if rows is None:
+            eye = np.eye(n)
+            rows = cls._BOUNDS[key] = np.vstack([-eye[lo], eye[hi]])
+            rows.flags.writeable = False
+        return rows
 
     @classmethod
     def fits(cls, A_eq: np.ndarray) -> bool:
@@ -161,16 +177,23 @@ class VertexLP:
         b = np.asarray(b_eq, float)
         rhs = self.e - self.CP @ b  # C N z <= rhs
         picked = rhs[self.combos]  # (k, d)
-        z = sum(picked[:, t, None] * w for t, w in enumerate(self.weights))  # (k, d)
+        W = self.weights
+        z = picked[:, 0, None] * W[:, 0]
+        for t in range(1, W.shape[1]):
+            z = z + picked[:, t, None] * W[:, t]
         feasible = np.all(self.CN @ z.T - rhs[:, None] <= self.TOL, axis=0)
         if not feasible.any():
             return None
         cost = np.where(feasible, z @ self.cN, np.inf)
         low = cost.min()
-        tied = cost <= low + 1e-9 * (1.0 + abs(low))
+        tied = np.flatnonzero(cost <= low + 1e-9 * (1.0 + abs(low)))
         # the optimum may be a whole face (here often: which holding finger takes the
         # friction); its vertices' mean is optimal too and keeps off the cones' edges
-        return self.P @ b + self.N @ z[tied].mean(axis=0)
+        best = z[tied[0]] if len(tied) == 1 else z[tied].mean(axis=0)
+        return self.P @ b + self.N @ best
+
+
+_SIGNS2 = np.array([[1.0, -1.0], [-1.0, 1.0]])  # signs of the 2 x 2 inverse's entries
 
 
 def linprog(c: np.ndarray, A_eq: np.ndarray, b_eq: np.ndarray, A_ub: np.ndarray | None = None,

@@ -101,6 +101,24 @@ def test_cli_prints_the_table_and_writes_frames_and_plots(sweep, tmp_path, capsy
     assert capsys.readouterr().out.count("ppo,default,easy") == 1
 
 
+def test_perturbation_bars_split_by_noise(tmp_path):
+    from inhand_exp.analysis.plots import outcome_bars, outcome_stats
+    rows = []
+    for noise, wins in (("none", {"none": 9, "heavier": 7}), ("paper", {"none": 6, "heavier": 5})):
+        for perturb, w in wins.items():
+            for k in range(10):
+                e = episode(k, "medium", k < w, seed=0, dropped=k == 9 and w < 9)
+                rows.append(e | {"noise": noise, "perturb": perturb})
+    frame = pd.DataFrame(rows)
+    stats = outcome_stats(frame, "perturb", hue=("learner", "noise")).set_index(
+        ["noise", "perturb"])
+    assert len(stats) == 4  # two noise settings x two objects, not merged into two bars
+    assert stats.loc[("none", "heavier"), "success"] == pytest.approx(0.7)
+    assert stats.loc[("paper", "none"), "drop"] == pytest.approx(0.1)
+    assert outcome_bars(frame, "perturb", tmp_path / "p.png", hue=("learner", "noise")) \
+        .stat().st_size > 1000
+
+
 def test_cli_refuses_paths_without_logs(tmp_path, capsys):
     with pytest.raises(SystemExit) as end:
         main([str(tmp_path / "nowhere")])

@@ -57,6 +57,7 @@ def main(argv: list[str] | None = None) -> None:
     made = [plots.learning_curves(frames.iterations, out / "learning_curves.png"),
             plots.outcome_bars(frames.episodes, "group", out / "by_group.png")]
     if not frames.episodes.empty and frames.episodes["perturb"].nunique() > 1:
-        made.append(plots.outcome_bars(frames.episodes, "perturb", out / "by_perturbation.png"))
+        made.append(plots.outcome_bars(frames.episodes, "perturb", out / "by_perturbation.png",
+                                       hue=("learner", "noise")))
     print(f"\nwritten to {out}: frames (CSV, Parquet), tables, "
           f"{sum(p is not None for p in made)} plots")

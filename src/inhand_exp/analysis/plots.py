@@ -47,24 +47,36 @@ def learning_curves(iterations: pd.DataFrame, path: Path, smooth: int = 8) -> Pa
     return path
 
 
-def outcome_bars(episodes: pd.DataFrame, by: str, path: Path) -> Path | None:
-    """Success and drop rate (mean over seeds, error bar: std) per ``by`` value and learner."""
-    if episodes.empty or by not in episodes:
-        return None
-    seeds = per_seed(episodes, ["learner", by])
-    stats = seeds.groupby(["learner", by]).agg(
+def outcome_stats(episodes: pd.DataFrame, by: str, hue: tuple[str, ...] = ("learner",)
+                  ) -> pd.DataFrame:
+    """Success and drop rate, mean and std over seeds, per setting of ``hue`` and ``by``."""
+    keys = [*hue, by]
+    return per_seed(episodes, keys).groupby(keys, dropna=False).agg(
         success=("success_rate", "mean"), success_std=("success_rate", "std"),
         drop=("drop_rate", "mean"), drop_std=("drop_rate", "std")).reset_index()
+
+
+def outcome_bars(episodes: pd.DataFrame, by: str, path: Path,
+                 hue: tuple[str, ...] = ("learner",)) -> Path | None:
+    """Success and drop rate (mean over seeds, error bar: std) per ``by`` value, one bar per
+    setting of the ``hue`` columns (the learner; for Table III also the noise)."""
+    if episodes.empty or by not in episodes:
+        return None
+    stats = outcome_stats(episodes, by, hue)
     cats = list(dict.fromkeys(stats.sort_values(by, key=paper_rank, kind="stable")[by]))
-    learners = list(dict.fromkeys(stats["learner"]))
+    settings = list(dict.fromkeys(zip(*(stats[h] for h in hue), strict=True)))
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.5), sharey=True)
-    width = 0.8 / max(len(learners), 1)
+    width = 0.8 / max(len(settings), 1)
     for ax, metric in zip(axes, ("success", "drop"), strict=True):
-        for j, learner in enumerate(learners):
-            s = stats[stats["learner"] == learner].set_index(by).reindex(cats)
+        for j, setting in enumerate(settings):
+            mine = np.logical_and.reduce([stats[h] == v for h, v in zip(hue, setting,
+                                                                          strict=True)])
+            s = stats[mine].set_index(by).reindex(cats)
+            label = ", ".join(f"{h} {v}" if h != "learner" else str(v)
+                              for h, v in zip(hue, setting, strict=True))
             ax.bar(np.arange(len(cats)) + j * width, s[metric], width,
-                   yerr=s[f"{metric}_std"].fillna(0), label=learner, capsize=2)
-        ax.set_xticks(np.arange(len(cats)) + width * (len(learners) - 1) / 2, cats)
+                   yerr=s[f"{metric}_std"].fillna(0), label=label, capsize=2)
+        ax.set_xticks(np.arange(len(cats)) + width * (len(settings) - 1) / 2, cats)
         ax.set_title(f"{metric} rate by {by}")
         ax.set_ylim(0, 1)
     axes[0].legend(fontsize=8)

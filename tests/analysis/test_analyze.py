@@ -119,6 +119,26 @@ def test_perturbation_bars_split_by_noise(tmp_path):
         .stat().st_size > 1000
 
 
+def test_robustness_rows_give_the_change_from_the_trained_object():
+    rows = []
+    wins = {("none", "none"): 9, ("none", "heavier"): 7, ("paper", "none"): 6,
+            ("paper", "thinner"): 5, ("paper", "longer"): 6}
+    for (noise, perturb), w in wins.items():
+        rows += [episode(k, "medium", k < w, seed=0) | {"noise": noise, "perturb": perturb,
+                                                        "variant": "default"}
+                 for k in range(10)]
+    out = tables.build(pd.DataFrame(rows), "robustness").set_index(["noise", "perturb"])
+    assert out.loc[("none", "heavier"), "vs_trained"] == pytest.approx(-0.2)
+    assert out.loc[("paper", "longer"), "vs_trained"] == pytest.approx(0.0)
+    assert out.loc[("none", "none"), "vs_trained"] == pytest.approx(0.0)
+    # the paper's own change (Table III: 91.0 % thinner against 93.2 % with noise)
+    assert out.loc[("paper", "thinner"), "paper_vs_trained"] == pytest.approx(0.910 - 0.932)
+    text = tables.render(out.reset_index(), "robustness")
+    assert "vs trained object" in text and "| -20.0 pts |" in text
+    alone = tables.build(pd.DataFrame(rows[10:20]), "robustness")  # no trained-object row
+    assert alone["vs_trained"].isna().all() and "| - |" in tables.render(alone, "robustness")
+
+
 def test_cli_refuses_paths_without_logs(tmp_path, capsys):
     with pytest.raises(SystemExit) as end:
         main([str(tmp_path / "nowhere")])

@@ -88,7 +88,24 @@ def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
                "avg_time_s"]].rename(
         columns={"success_rate": "paper_success", "drop_rate": "paper_drop",
                  "avg_time_s": "paper_time_s"})
-    return out.merge(ref, on=[k for k in keys if k != "variant"], how="left")
+    out = out.merge(ref, on=[k for k in keys if k != "variant"], how="left")
+    if table == "robustness":
+        out = _vs_trained(out)
+    return out
+
+
+def _vs_trained(rows: pd.DataFrame) -> pd.DataFrame:
+    """Each row's success minus that of the trained object (``perturb=none``) of the same
+    learner, variant and noise, ours and the paper's (Table III's comparison; NaN where the
+    trained object was not evaluated)."""
+    same = ["learner", "variant", "noise"]
+    base = rows[rows["perturb"] == "none"].set_index(same)
+    idx = pd.MultiIndex.from_frame(rows[same])
+    rows = rows.copy()
+    for col, name in (("success_rate_mean", "vs_trained"), ("paper_success", "paper_vs_trained")):
+        ref = base[col].reindex(idx).to_numpy(dtype=float)
+        rows[name] = rows[col].to_numpy(dtype=float) - ref
+    return rows
 
 
 def paper_rank(column: pd.Series) -> pd.Series:
@@ -118,6 +135,10 @@ def _ref(v: float, pct: bool) -> str:
     return "-" if pd.isna(v) else (f"{v * 100:.1f} %" if pct else f"{v:.2f}")
 
 
+def _points(v: float) -> str:
+    return "-" if pd.isna(v) else f"{v * 100:+.1f} pts"
+
+
 def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
     """``rows`` (from ``build``) as a markdown table, or CSV."""
     if rows.empty:
@@ -128,7 +149,9 @@ def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
         raise ValueError(f"format must be markdown or csv, got {fmt!r}")
     keys = [c for c in ("learner", "variant", "group", "perturb", "noise", "object")
             if c in rows.columns and (c != "variant" or rows[c].nunique() > 1)]
-    head = [*keys, "seeds", "episodes", "success", "paper", "drops", "paper", "timeouts",
+    vs = "vs_trained" in rows.columns  # Table III: the change from the trained object
+    head = [*keys, "seeds", "episodes", "success", "paper",
+            *(("vs trained object", "paper") if vs else ()), "drops", "paper", "timeouts",
             "avg time (s)", "paper"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in rows.iterrows():
@@ -136,6 +159,7 @@ def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
             str(int(r["seeds"])), str(int(r["episodes"])),
             _cell(r["success_rate_mean"], r["success_rate_std"], True),
             _ref(r.get("paper_success"), True),
+            *((_points(r["vs_trained"]), _points(r["paper_vs_trained"])) if vs else ()),
             _cell(r["drop_rate_mean"], r["drop_rate_std"], True), _ref(r.get("paper_drop"), True),
             _cell(r["timeout_rate_mean"], r["timeout_rate_std"], True),
             _cell(r["avg_time_s_mean"], r["avg_time_s_std"], False),

@@ -396,6 +396,71 @@ def test_repose_on_perturbed_object_with_nominal_model(nominal_model, make_world
     assert touching(world) == {0, 1, 2}
 
 
+WIDTHS = [p for p in PERTURBATIONS if p.width_scale != 1.0]
+# An error of the observed position, within noise=paper's +-5 mm. (An angle error tilts the
+# slide's own axis: the lone finger's upward slide then falls 3-4 mm short per 0.01 rad.)
+HELD_ERROR = np.array([0.004, -0.003, 0.0])
+
+
+def perturbed_world(make_world, contacts: Contacts, pose: np.ndarray, perturb: PerturbConfig):
+    """A world whose simulated pole is ``perturb``ed, the tips on its real surface."""
+    nominal = ObjectConfig()
+    actual = dataclasses.replace(nominal, length_m=nominal.length_m * perturb.length_scale,
+                                 width_m=nominal.width_m * perturb.width_scale,
+                                 mass_kg=nominal.mass_kg * perturb.mass_scale)
+    surface = HandModel.from_config(HandConfig(), actual, SimConfig().gravity_mps2)
+    return make_world(contacts, pose, perturb=perturb, q_model=surface)
+
+
+@pytest.mark.parametrize(("finger", "dc"), [(0, SLIDE_DC), (1, -SLIDE_DC)], ids=["0+", "1-"])
+@pytest.mark.parametrize("perturb", WIDTHS, ids=[p.name for p in WIDTHS])
+def test_slide_on_a_wider_or_narrower_pole_ends_done(nominal_model, make_world, perturb,
+                                                     finger, dc):
+    """The nominal face lies 5 mm off the real one: the slide plans and judges from where its
+    tip touches, so it ends done at its target (judged on the nominal face it timed out)."""
+    world = perturbed_world(make_world, BEND, X0, perturb)
+    c0 = contact_coords(world)
+    out = execute(world, Slide(nominal_model, BEND, finger, dc, SLIDE_S), settle_early=True)
+    assert out.reason == "done", out
+    assert abs(contact_coords(world)[finger] - c0[finger] - dc) < 3e-3
+    assert touching(world) == {0, 1, 2}
+
+
+@pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))
+@pytest.mark.parametrize("perturb", WIDTHS, ids=[p.name for p in WIDTHS])
+def test_flip_lands_on_the_real_face_of_a_wider_or_narrower_pole(nominal_model, make_world,
+                                                                  perturb, finger):
+    """The new face is found where the staying finger on it touches: the flipped tip lands on
+    the real face (aimed at the nominal one it hovered 4 mm off a narrower pole's)."""
+    contacts = FLIP_SETUPS[finger]
+    world = perturbed_world(make_world, contacts, XF, perturb)
+    up_before = pushes_right(world)
+    out = execute(world, Flip(nominal_model, contacts, finger, FLIP_S))
+    assert out.reason == "done", out
+    up_after = pushes_right(world)
+    assert set(up_after) == {0, 1, 2} and up_after[finger] != up_before[finger]
+
+
+@pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))
+def test_slide_and_flip_under_a_held_observation_error(nominal_model, make_world, finger):
+    """An error of the observed position puts every tip off its nominal face: the slide and the
+    flip take the faces where the tips find them, and both end done (judged on the nominal
+    faces, the slides timed out and the flips were refused)."""
+    contacts = FLIP_SETUPS[finger]
+    world = make_world(contacts, XF)
+    up_before = pushes_right(world)
+    out = execute(world, Flip(nominal_model, contacts, finger, FLIP_S), HELD_ERROR)
+    assert out.reason == "done", out
+    up_after = pushes_right(world)
+    assert set(up_after) == {0, 1, 2} and up_after[finger] != up_before[finger]
+    world = make_world(BEND, X0)
+    c0 = contact_coords(world)
+    out = execute(world, Slide(nominal_model, BEND, finger, SLIDE_DC, SLIDE_S), HELD_ERROR,
+                  settle_early=True)
+    assert out.reason == "done", out
+    assert abs(contact_coords(world)[finger] - c0[finger] - SLIDE_DC) < 3e-3
+
+
 # --- geometry ---------------------------------------------------------------------------------
 
 

@@ -37,7 +37,10 @@ from inhand_exp.config import ConfigError, PerturbConfig, validate
 # Trials per section when --trials is not given: the targets of the physics milestone.
 DEFAULT_TRIALS = {"hold": 100, "repose": 1000, "slide": 500, "flip_left": 200,
                   "flip_right": 200, "flip_left_tilted": 10, "flip_right_tilted": 10,
-                  "perturbed": 200, "release": 200, "land": 200}
+                  "perturbed": 200, "perturbed_flip": 50, "release": 200, "land": 200}
+# What the perturbed section runs on each perturbed pole and under noise: every primitive the
+# pole's mid level uses (the controllers keep the nominal model).
+PERTURBED_PRIMITIVES = ("repose", "slide", "flip_left", "flip_right")
 TILTED_RAD = 1.0  # the flip_*_tilted sections start from |theta| >= this
 PERTURBATIONS = {"heavier": dict(mass_scale=1.1), "lighter": dict(mass_scale=0.9),
                  "thicker": dict(width_scale=1.5), "thinner": dict(width_scale=0.5),
@@ -116,9 +119,12 @@ def primitives(args, cfg: DictConfig) -> dict:
             settings = [(p, (0.0, 0.0)) for p in PERTURBATIONS] + [("none", noise_paper)]
             for setting in settings:
                 label = setting[0] if setting[0] != "none" else "noise=paper"
-                res = run_section(pool, cfg, setting, "repose", count("perturbed"), args.seed)
-                out["perturbed"][label] = res
-                _print_row(f"repose {label}", res)
+                out["perturbed"][label] = {}
+                for name in PERTURBED_PRIMITIVES:
+                    n = count("perturbed_flip" if name.startswith("flip") else "perturbed")
+                    res = run_section(pool, cfg, setting, name, n, args.seed)
+                    out["perturbed"][label][name] = res
+                    _print_row(f"{name} {label}", res)
     finally:
         if pool:
             pool.shutdown()

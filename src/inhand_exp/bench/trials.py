@@ -109,7 +109,10 @@ def _unit_reposes(b: Bench) -> list[np.ndarray]:
                                   [0, 0, dth], [0, 0, -dth])]
 
 
-def _feasible(primitive, obs: Observation) -> bool:
+def _feasible(primitive, obs: Observation, offset: np.ndarray | None = None) -> bool:
+    """The primitive's own check, on the pose as observed (with the trial's held error)."""
+    if offset is not None:
+        obs = Observation(obs.q, obs.qd, obs.pose + offset, obs.twist, 0.0)
     return primitive.start(obs) is None
 
 
@@ -120,8 +123,7 @@ def repose(b: Bench, rng: np.random.Generator) -> Trial | None:
     for k in rng.permutation(6):
         delta = _unit_reposes(b)[k]
         prim = Repose(b.model, contacts, delta, b.prim.repose_duration_s, b.prim)
-        obs = b.observe()
-        if _feasible(prim, Observation(obs.q, obs.qd, obs.pose + offset, obs.twist, 0.0)):
+        if _feasible(prim, b.observe(), offset):
             break
     else:
         return None
@@ -138,16 +140,17 @@ def slide(b: Bench, rng: np.random.Generator) -> Trial | None:
     """A random feasible slide of one finger by the configured step."""
     contacts = b.start(rng)
     dc = b.prim.slide_dc_m
+    offset = b.offset(rng)
     for k in rng.permutation(6):
         finger, sign = int(k // 2), (1 if k % 2 == 0 else -1)
         prim = Slide(b.model, contacts, finger, sign * dc, b.prim.slide_duration_s, b.prim)
-        if _feasible(prim, b.observe()):
+        if _feasible(prim, b.observe(), offset):
             break
     else:
         return None
     before = b.coords()
     t = time.perf_counter()
-    out = execute(b.world, prim, b.offset(rng), settle_early=b.prim.settle_early)
+    out = execute(b.world, prim, offset, settle_early=b.prim.settle_early)
     moved = b.coords() - before
     err = abs(float(moved[finger]) - sign * dc)
     in_contact = finger in b.faces()
@@ -162,6 +165,7 @@ def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 200,
     upright, to either side) where the flip's own check allows it. Tilted pinches are rare
     and their flips rarer: that search is cut to 20 grasps of at most 100 draws each."""
     ws, tries = b.workspace, 4000
+    offset = b.offset(rng)
     if min_tilt > 0:
         max_grasps, tries = min(max_grasps, 20), 100
     for _ in range(max_grasps):
@@ -174,14 +178,14 @@ def flip(b: Bench, rng: np.random.Generator, finger: int, max_grasps: int = 200,
         except GeometryError:  # no pinch grasp found in this part of the workspace
             continue
         prim = Flip(b.model, contacts, finger, b.prim.flip_duration_s, b.prim)
-        if _feasible(prim, b.observe()):
+        if _feasible(prim, b.observe(), offset):
             break
     else:
         return None
     before = b.faces().get(finger, 0.0)
     start = b.world.object_pose()
     t = time.perf_counter()
-    out = execute(b.world, prim, b.offset(rng))
+    out = execute(b.world, prim, offset)
     after = b.faces()
     em, er = _pose_error(b.world.object_pose(), start)
     ok = out.ok and len(after) == 3 and after.get(finger, before) == -before

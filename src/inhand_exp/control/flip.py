@@ -20,6 +20,7 @@ from inhand_exp.control.grasp import (
     Contacts,
     Face,
     face_axes,
+    face_shifted,
     rotation,
 )
 from inhand_exp.control.hand import HandModel
@@ -98,13 +99,25 @@ def handover_torques(model: HandModel, pair: GraspPlan, finger: int, mix, tracke
     return tau
 
 
-def landed(model: HandModel, finger: int, face: Face, coord: float, obs, tol_m: float
-           ) -> str | None:
-    """None when ``finger`` touches ``face`` within ``tol_m`` of ``coord``, else what is off."""
+def landed(model: HandModel, finger: int, face: Face, coord: float, obs, tol_m: float,
+           face_gap: float = 0.0) -> str | None:
+    """None when ``finger`` touches ``face`` (found ``face_gap`` off the nominal one) within
+    ``tol_m`` of ``coord``, else what is off."""
     gap, at = model.surface_gap(finger, face, obs.pose, obs.q)
+    gap -= face_gap
     if abs(gap) <= tol_m and abs(at - coord) <= tol_m:
         return None
     return f"finger {finger} {gap * 1e3:.1f} mm off {face.name.lower()} at {at:+.3f} m"
+
+
+def face_gap(model: HandModel, contacts: Contacts, face: Face, obs,
+             exclude: int | None = None) -> float:
+    """Where ``face`` is found, off the nominal one (m, outward positive): the mean gap of the
+    fingertips that touch it (0 if none does). A thinner object, or an error in the observed
+    pose, shows here as the fingers' own positions."""
+    gaps = [model.surface_gap(j, face, obs.pose, obs.q)[0] for j in range(3)
+            if j != exclude and contacts.active[j] and contacts.posture.faces[j] == face]
+    return float(np.mean(gaps)) if gaps else 0.0
 
 
 class Flip:
@@ -146,7 +159,12 @@ class Flip:
         self.contacts = model.measured(c, obs.pose, obs.q)
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
         self.origin = obs.pose.copy()
-        found = self._landing(obs, c.posture.faces[i])
+        face = c.posture.faces[i]
+        # the faces where the fingertips find them: the new face is where the staying finger
+        # on it touches, the old one where this finger does
+        self.gap_old = face_gap(model, c, face, obs)
+        self.gap_new = face_gap(model, c, OPPOSITE[face], obs, exclude=i)
+        found = self._landing(obs, face)
         if found is None:
             return f"no landing on the other face that holds the object has a clear path for " \
                    f"finger {i}"
@@ -155,15 +173,17 @@ class Flip:
         return None
 
     def _ik_clear(self, point_O: np.ndarray, pose: np.ndarray, R: np.ndarray,
-                  margin: float, prefer: int | None = None) -> np.ndarray | None:
-        """Joint angles putting the tip centre at ``point_O`` with the links ``margin`` clear,
-        the branch ``prefer`` first."""
+                  margin: float, prefer: int | None = None,
+                  check_pose: np.ndarray | None = None) -> np.ndarray | None:
+        """Joint angles putting the tip centre at ``point_O`` with the links ``margin`` clear
+        of the object (at ``check_pose`` if given), the branch ``prefer`` first."""
         f = self.model.fingers[self.finger]
+        check = pose if check_pose is None else check_pose
         order = (1, -1) if prefer is None or prefer == 1 else (-1, 1)
         for elbow in order:
             qi = f.ik(pose[:2] + R @ point_O, elbow)
             if qi is not None and f.within_limits(qi, 0.05) and \
-                    self.model.finger_gap(self.finger, qi, pose) >= margin:
+                    self.model.finger_gap(self.finger, qi, check) >= margin:
                 return qi
         return None
 
@@ -186,21 +206,25 @@ class Flip:
         q_lift = self._ik_clear(lift_O, pose, R, model.clearance, prefer=self.elbow)
         if q_lift is None:
             return None
-        space = FreeSpace(model, i, pose, self.air)
+        # the travel keeps its air to the faces where they were found, if further out
+        space = FreeSpace(model, i, pose, self.air + max(0.0, self.gap_old, self.gap_new))
         if not space.ok(q_lift):
             return None
         hx, hz = shape.half_x, shape.half_z
+        g = self.gap_new
+        at_new = face_shifted(pose, face_axes(new_face)[0], g)
         tries = 0
         for coord in sorted((j * step_m for j in range(-n, n + 1)), key=lambda c: abs(c - here)):
             if not lo <= coord <= hi:
                 continue
-            q_touch = self._ik_clear(hover(hx, hz, new_face, coord, r - self.press), pose, R,
-                                     model.clearance)
+            q_touch = self._ik_clear(hover(hx, hz, new_face, coord, r + g - self.press), pose,
+                                     R, model.clearance, check_pose=at_new)
             if q_touch is None:
                 continue
             branch = 1 if q_touch[1] >= 0 else -1
-            q_hover = self._ik_clear(hover(hx, hz, new_face, coord, r + self.clearance), pose,
-                                     R, model.clearance, prefer=branch)
+            q_hover = self._ik_clear(hover(hx, hz, new_face, coord, r + g + self.clearance),
+                                     pose, R, model.clearance, prefer=branch,
+                                     check_pose=at_new)
             if q_hover is None or not space.ok(q_hover) or not strict_hold(
                     model, self.contacts.moved(i, coord=coord, face=new_face), self.gains):
                 continue
@@ -220,7 +244,7 @@ class Flip:
     def achieved(self, obs, tol_m: float = 0.003) -> str | None:
         """The tip on the new face, within ``tol_m`` of the landing."""
         face = self.result.posture.faces[self.finger]
-        return landed(self.model, self.finger, face, self.coord, obs, tol_m)
+        return landed(self.model, self.finger, face, self.coord, obs, tol_m, self.gap_new)
 
     def torques(self, obs) -> np.ndarray | None:
         t = obs.t

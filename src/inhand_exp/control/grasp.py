@@ -123,6 +123,15 @@ def rotation(theta: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
+def face_shifted(pose: np.ndarray, inward_O: np.ndarray, gap: float) -> np.ndarray:
+    """The pose that puts the nominal object's face of inward normal ``inward_O`` ``gap``
+    further out (negative: further in), where a fingertip found it: the nominal shape checked
+    at this pose stands for the real object on that side (a thinner or thicker one, or one
+    seen with an error)."""
+    shift = rotation(pose[2]) @ (-gap * np.asarray(inward_O))
+    return np.array([pose[0] + shift[0], pose[1] + shift[1], pose[2]])
+
+
 def cross2(a: np.ndarray, b: np.ndarray) -> float:
     """z-component of the planar cross product: torque of force ``b`` at lever ``a``."""
     return float(a[0] * b[1] - a[1] * b[0])

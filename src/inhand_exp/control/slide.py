@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from inhand_exp.config import PrimitivesConfig
-from inhand_exp.control.grasp import Contacts, face_axes, rotation
+from inhand_exp.control.grasp import Contacts, face_axes, face_shifted, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
     GraspPlan,
@@ -84,21 +84,23 @@ class Slide:
         self.n_O, self.along_O = face_axes(face)
         # the geometric checks first: they cost microseconds, the force plans milliseconds
         R = rotation(obs.pose[2])
-        tip_O = R.T @ (model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2])
-        self.c0 = model.shape.coord_of(face, tip_O)  # the contact point's coordinate too
+        # where the face really is: the tip touches it, so its gap to the nominal face is the
+        # face's offset (a thinner or thicker object, the held error of the observed pose)
+        self.gap0, self.c0 = model.surface_gap(i, face, obs.pose, obs.q)
         self.c1 = self.c0 + self.dc
         limit = model.shape.half_extent(face) - model.tip_radius
         if abs(self.c1) > limit:
             return f"finger {i} would slide past the end of its face ({self.c1:+.3f} m)"
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
         surface, _ = model.shape.local_contact(face, self.c1)
-        end = obs.pose[:2] + R @ (surface - model.tip_radius * self.n_O)
+        end = obs.pose[:2] + R @ (surface - (model.tip_radius + self.gap0) * self.n_O)
         q_end = model.fingers[i].ik(end, self.elbow)
         if q_end is None:
             return f"finger {i} cannot reach the end of the slide"
         if abs(np.sin(q_end[1])) < self.min_bend:
             return f"finger {i} would end the slide stretched nearly straight"
-        if model.finger_gap(i, q_end, obs.pose) < model.clearance:
+        if model.finger_gap(i, q_end, face_shifted(obs.pose, self.n_O, self.gap0)) \
+                < model.clearance:
             return f"finger {i}'s links would cut into the object at the end of the slide"
         drag = drag_of(model, face, self.dc)
         self.plan = plan_for(model, c, obs, self.gains, sliding=i, drag=drag)
@@ -114,13 +116,14 @@ class Slide:
         return None
 
     def achieved(self, obs, tol_m: float = 0.003) -> str | None:
-        """The tip within ``tol_m`` of its target coordinate and touching the face."""
+        """The tip within ``tol_m`` of its target coordinate and of the face where it touched
+        at the start (``gap0`` off the nominal face)."""
         gap, coord = self.model.surface_gap(self.finger, self.contacts.posture.faces[self.finger],
                                             obs.pose, obs.q)
-        if abs(coord - self.c1) <= tol_m and abs(gap) <= tol_m:
+        if abs(coord - self.c1) <= tol_m and abs(gap - self.gap0) <= tol_m:
             return None
         return (f"finger {self.finger} at {coord:+.3f} m (target {self.c1:+.3f}), "
-                f"{gap * 1e3:.1f} mm off its face")
+                f"{(gap - self.gap0) * 1e3:.1f} mm off its face")
 
     def settled(self, obs, joint_speed: float = 0.05) -> bool:
         """Past the move, the tip at its target, the object at rest and the sliding finger's

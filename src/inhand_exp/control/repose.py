@@ -23,6 +23,7 @@ from inhand_exp.control.grasp import (
     contact_frames,
     cross2,
     face_axes,
+    face_shifted,
     grasp_matrix,
     rotation,
 )
@@ -278,12 +279,17 @@ class Repose:
         if self.model.palm_gap(self.goal) < self.model.clearance:
             return "the object would come down onto the palm"
         R = rotation(self.goal[2])
+        faces = self.contacts.posture.faces
         for k, i in enumerate(self.plan.fingers):
             tip = self.goal[:2] + R @ self.plan.tips_O[k]
             qi = self.model.fingers[i].ik(tip, 1 if obs.q[2 * i + 1] >= 0 else -1)
             if qi is None:
                 return f"finger {i} cannot follow the object to the target pose"
-            if self.model.finger_gap(i, qi, self.goal) < self.model.clearance:
+            # its links against the face where its tip touches it (a thinner or thicker
+            # object, an error of the observed pose), not the nominal face
+            gap, _ = self.model.surface_gap(i, faces[i], obs.pose, obs.q)
+            at = face_shifted(self.goal, self.plan.normals_O[k], gap)
+            if self.model.finger_gap(i, qi, at) < self.model.clearance:
                 return f"finger {i}'s links would cut into the object at the target pose"
         return None
 

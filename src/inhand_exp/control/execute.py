@@ -17,8 +17,9 @@ class Observation:
     """What the controllers see: joints exactly, the object pose possibly with noise.
 
     ``plans``: a cache of the grasp plans made from this very observation (see
-    ``repose.plan_for``), so that primitives planned on it together (the feasibility filter
-    plans every action) build each plan once; None disables it.
+    ``repose.plan_for``), and of the tips' gaps to their faces (``repose.face_gaps``), so that
+    primitives planned on it together (the feasibility filter plans every action) work each
+    out once; None disables it.
     """
 
     q: np.ndarray

@@ -28,6 +28,7 @@ from inhand_exp.control.handover import blended_forces, hover
 from inhand_exp.control.joint_path import FreeSpace, JointPath, arrival_times, plan_joint_path
 from inhand_exp.control.repose import (
     GraspPlan,
+    face_gaps,
     follow_qdd,
     landing_span,
     object_wrench,
@@ -115,7 +116,7 @@ def face_gap(model: HandModel, contacts: Contacts, face: Face, obs,
     """Where ``face`` is found, off the nominal one (m, outward positive): the mean gap of the
     fingertips that touch it (0 if none does). A thinner object, or an error in the observed
     pose, shows here as the fingers' own positions."""
-    gaps = [model.surface_gap(j, face, obs.pose, obs.q)[0] for j in range(3)
+    gaps = [g for j, g in enumerate(face_gaps(model, contacts, obs))
             if j != exclude and contacts.active[j] and contacts.posture.faces[j] == face]
     return float(np.mean(gaps)) if gaps else 0.0
 

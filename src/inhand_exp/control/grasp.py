@@ -128,8 +128,9 @@ def face_shifted(pose: np.ndarray, inward_O: np.ndarray, gap: float) -> np.ndarr
     further out (negative: further in), where a fingertip found it: the nominal shape checked
     at this pose stands for the real object on that side (a thinner or thicker one, or one
     seen with an error)."""
-    shift = rotation(pose[2]) @ (-gap * np.asarray(inward_O))
-    return np.array([pose[0] + shift[0], pose[1] + shift[1], pose[2]])
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    nx, nz = -gap * float(inward_O[0]), -gap * float(inward_O[1])
+    return np.array([pose[0] + c * nx - s * nz, pose[1] + s * nx + c * nz, pose[2]])
 
 
 def cross2(a: np.ndarray, b: np.ndarray) -> float:

@@ -108,6 +108,19 @@ def plan_for(model: HandModel, contacts, obs, gains: PrimitivesConfig, sliding: 
     return plan
 
 
+def face_gaps(model: HandModel, contacts, obs) -> tuple[float, ...]:
+    """Each finger's tip gap to its nominal face in ``obs`` (``HandModel.surface_gap``: where
+    it finds its face), worked out once per observation when it carries a cache."""
+    key = ("gaps", id(model), contacts)
+    if obs.plans is not None and key in obs.plans:
+        return obs.plans[key]
+    gaps = tuple(model.surface_gap(i, face, obs.pose, obs.q)[0]
+                 for i, face in enumerate(contacts.posture.faces))
+    if obs.plans is not None:
+        obs.plans[key] = gaps
+    return gaps
+
+
 def strict_hold(model: HandModel, contacts: Contacts, gains: PrimitivesConfig) -> bool:
     """True when ``contacts`` (as commanded, active fingers only) admit a squeeze strictly inside
     the friction cones: the grasp holds whatever the small wrenches a controller asks for."""
@@ -279,7 +292,7 @@ class Repose:
         if self.model.palm_gap(self.goal) < self.model.clearance:
             return "the object would come down onto the palm"
         R = rotation(self.goal[2])
-        faces = self.contacts.posture.faces
+        gaps = face_gaps(self.model, self.contacts, obs)
         for k, i in enumerate(self.plan.fingers):
             tip = self.goal[:2] + R @ self.plan.tips_O[k]
             qi = self.model.fingers[i].ik(tip, 1 if obs.q[2 * i + 1] >= 0 else -1)
@@ -287,8 +300,7 @@ class Repose:
                 return f"finger {i} cannot follow the object to the target pose"
             # its links against the face where its tip touches it (a thinner or thicker
             # object, an error of the observed pose), not the nominal face
-            gap, _ = self.model.surface_gap(i, faces[i], obs.pose, obs.q)
-            at = face_shifted(self.goal, self.plan.normals_O[k], gap)
+            at = face_shifted(self.goal, self.plan.normals_O[k], gaps[i])
             if self.model.finger_gap(i, qi, at) < self.model.clearance:
                 return f"finger {i}'s links would cut into the object at the target pose"
         return None

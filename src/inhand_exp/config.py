@@ -120,6 +120,11 @@ class PrimitivesConfig:
     repose_dz_m: float = spec(0.01, "Repose step along z (m).", gt=0)
     repose_dtheta_rad: float = spec(0.1, "Repose step in angle (rad).", gt=0)
     slide_dc_m: float = spec(0.02, "Slide step of one fingertip along the surface (m).", gt=0)
+    end_margin_m: float = spec(0.025, "Distance a slide keeps its fingertip from the model's "
+                               "end of the face, beyond the tip's radius (m): room for an "
+                               "object shorter than modelled, whose ends no fingertip feels "
+                               "until it is past them. A slide back from inside the margin "
+                               "is always allowed.", ge=0)
     slide: bool = spec(True, "Offer the slide actions (6 for the pole).")
     flip: bool = spec(True, "Offer flip-left / flip-right (pole).")
     release_land: bool = spec(False, "Offer release / land per finger (cube).")

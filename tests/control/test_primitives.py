@@ -15,7 +15,13 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from inhand_exp.config import HandConfig, ObjectConfig, PerturbConfig, SimConfig
+from inhand_exp.config import (
+    HandConfig,
+    ObjectConfig,
+    PerturbConfig,
+    PrimitivesConfig,
+    SimConfig,
+)
 from inhand_exp.control.execute import Outcome, execute
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
@@ -187,7 +193,9 @@ def test_a_sagging_pole_never_settles(nominal_model, make_world):
 def test_slide_moves_only_its_finger(nominal_model, make_world, finger, dc):
     world = make_world(BEND, X0)
     c0, p0 = contact_coords(world), world.object_pose()
-    out = execute(world, Slide(nominal_model, BEND, finger, dc, SLIDE_S))
+    # finger 0 slides down to 2 cm from the end: on the nominal pole, no margin needed
+    nominal_pole = PrimitivesConfig(end_margin_m=0.0)
+    out = execute(world, Slide(nominal_model, BEND, finger, dc, SLIDE_S, nominal_pole))
     assert out.reason == "done", out
     moved = contact_coords(world) - c0
     assert abs(moved[finger] - dc) < 3e-3, moved
@@ -454,6 +462,36 @@ def test_slide_and_flip_under_a_held_observation_error(nominal_model, make_world
                   settle_early=True)
     assert out.reason == "done", out
     assert abs(contact_coords(world)[finger] - c0[finger] - SLIDE_DC) < 3e-3
+
+
+SHORTER = PERTURBATIONS[-1]
+assert SHORTER.length_scale < 1
+
+
+def test_slides_keep_their_margin_from_the_ends(nominal_model, make_world):
+    """No fingertip feels an end before it is past it: on a pole 10 % shorter than modelled,
+    a slide to 2 cm from the nominal end (past the real one) loses the pole; with the shipped
+    ``end_margin_m`` the filter refuses it and nothing moves."""
+    down = Slide(nominal_model, BEND, 0, -SLIDE_DC, SLIDE_S, PrimitivesConfig(end_margin_m=0.0))
+    assert abs(BEND.coords[0] - SLIDE_DC) < nominal_model.shape.half_z - nominal_model.tip_radius
+    world = perturbed_world(make_world, BEND, X0, SHORTER)
+    out = execute(world, down, settle_early=True)
+    assert out.reason == "lost_contact", out
+    world = perturbed_world(make_world, BEND, X0, SHORTER)
+    before = snapshot(world)
+    out = execute(world, Slide(nominal_model, BEND, 0, -SLIDE_DC, SLIDE_S), settle_early=True)
+    assert out.reason == "infeasible" and "of the end of its face" in out.detail, out
+    assert_untouched(world, before, out)
+
+
+def test_a_tip_inside_the_end_margin_may_slide_back(nominal_model, make_world):
+    near_end = BEND.moved(0, coord=-0.228)
+    margin = PrimitivesConfig().end_margin_m
+    assert nominal_model.shape.half_z - nominal_model.tip_radius - margin < 0.228
+    world = make_world(near_end, X0)
+    out = execute(world, Slide(nominal_model, near_end, 0, SLIDE_DC, SLIDE_S), settle_early=True)
+    assert out.reason == "done", out
+    assert abs(contact_coords(world)[0] - (-0.228 + SLIDE_DC)) < 3e-3
 
 
 # --- geometry ---------------------------------------------------------------------------------

@@ -91,6 +91,9 @@ class Slide:
         limit = model.shape.half_extent(face) - model.tip_radius
         if abs(self.c1) > limit:
             return f"finger {i} would slide past the end of its face ({self.c1:+.3f} m)"
+        if abs(self.c1) > limit - self.gains.end_margin_m and abs(self.c1) > abs(self.c0):
+            return (f"finger {i} would slide within {self.gains.end_margin_m * 1e3:.0f} mm "
+                    f"of the end of its face ({self.c1:+.3f} m)")
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
         surface, _ = model.shape.local_contact(face, self.c1)
         end = obs.pose[:2] + R @ (surface - (model.tip_radius + self.gap0) * self.n_O)

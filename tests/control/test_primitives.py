@@ -494,6 +494,27 @@ def test_a_tip_inside_the_end_margin_may_slide_back(nominal_model, make_world):
     assert abs(contact_coords(world)[0] - (-0.228 + SLIDE_DC)) < 3e-3
 
 
+LONGER = PERTURBATIONS[-2]
+assert LONGER.length_scale > 1
+
+
+@pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))
+def test_a_flip_passes_a_longer_poles_end_with_the_flip_end_margin(nominal_model, make_world,
+                                                                   finger):
+    """The flipping finger goes round the pole's lower end. On a pole 10 % longer than
+    modelled, the real end lies 2.5 cm beyond the nominal one: a path clear of the nominal end
+    hits it and knocks the pole away; with ``flip_end_margin_m`` the path keeps clear of it."""
+    contacts, pose = FLIP_SETUPS[finger], XF + np.array([0.0, 0.02, 0.0])
+    for margin, reason in ((0.0, "lost_contact"), (0.025, "done")):
+        world = perturbed_world(make_world, contacts, pose, LONGER)
+        up_before = pushes_right(world)
+        gains = PrimitivesConfig(flip_end_margin_m=margin)
+        out = execute(world, Flip(nominal_model, contacts, finger, FLIP_S, gains))
+        assert out.reason == reason, (margin, out)
+    up_after = pushes_right(world)
+    assert set(up_after) == {0, 1, 2} and up_after[finger] != up_before[finger]
+
+
 # --- geometry ---------------------------------------------------------------------------------
 
 

@@ -208,7 +208,9 @@ class Flip:
         if q_lift is None:
             return None
         # the travel keeps its air to the faces where they were found, if further out
-        space = FreeSpace(model, i, pose, self.air + max(0.0, self.gap_old, self.gap_new))
+        # and passes round the ends flip_end_margin_m further out (a longer pole)
+        space = FreeSpace(model.lengthened(self.gains.flip_end_margin_m), i, pose,
+                          self.air + max(0.0, self.gap_old, self.gap_new))
         if not space.ok(q_lift):
             return None
         hx, hz = shape.half_x, shape.half_z

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -68,6 +69,15 @@ class HandModel:
         if min(reach) < gap / 2 + self.tip_radius:
             raise GeometryError(f"fingers of reach {min(reach):.3f} m cannot meet between bases "
                                 f"{gap:.3f} m apart: the tips cannot hold an object together")
+
+    def lengthened(self, extra_m: float) -> HandModel:
+        """The same hand with the object ``extra_m`` longer at each end (a finger passing
+        round an end keeps that much more room from it)."""
+        if extra_m == 0:
+            return self
+        shape = BoxShape(self.shape.length_m + 2 * extra_m, self.shape.width_m,
+                         self.shape.mass_kg)
+        return dataclasses.replace(self, shape=shape)
 
     def tip_targets(self, contacts: Contacts, pose: np.ndarray) -> np.ndarray:
         """Fingertip centres (3, 2) touching the object at ``contacts`` when it is at ``pose``."""

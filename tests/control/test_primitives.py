@@ -464,6 +464,29 @@ def test_slide_and_flip_under_a_held_observation_error(nominal_model, make_world
     assert abs(contact_coords(world)[finger] - c0[finger] - SLIDE_DC) < 3e-3
 
 
+def test_a_slide_plans_its_forces_again_as_its_tip_moves(nominal_model, make_world,
+                                                         monkeypatch):
+    """Finger 1 slides up to the lone finger's height on a pole half as wide as modelled; the
+    pinch left holds its torque by the friction across the narrow faces. With forces planned
+    once, at the levers of the start, the pole tips out of the hand; planned again every
+    ``REPLAN_M`` of the tip's travel, it stays held by all three."""
+    import inhand_exp.control.slide as slide_module
+
+    thinner = next(p for p in WIDTHS if p.width_scale < 1)
+    contacts, pose = Contacts(Posture((L, L, R)), (-0.16, -0.19, -0.17)), np.array(
+        [-0.02, 0.46, -0.02])
+    outcomes = {}
+    for replan in (1.0, slide_module.REPLAN_M):
+        monkeypatch.setattr(slide_module, "REPLAN_M", replan)
+        world = perturbed_world(make_world, contacts, pose, thinner)
+        out = execute(world, Slide(nominal_model, contacts, 1, SLIDE_DC, SLIDE_S),
+                      settle_early=True)
+        outcomes[replan] = out.reason, touching(world)
+    assert outcomes[1.0][0] == "lost_contact", outcomes
+    assert outcomes[slide_module.REPLAN_M] in (("done", {0, 1, 2}), ("timeout", {0, 1, 2})), \
+        outcomes
+
+
 SHORTER = PERTURBATIONS[-1]
 assert SHORTER.length_scale < 1
 

@@ -29,6 +29,7 @@ from inhand_exp.control.repose import (
     strict_hold,
 )
 
+REPLAN_M = 0.005  # the sliding tip's travel along its face after which its plans are made again
 MAX_PUSH_N = 1.5  # the most a sliding finger presses (N): more, and its friction drags the object
 
 
@@ -105,7 +106,8 @@ class Slide:
         if model.finger_gap(i, q_end, face_shifted(obs.pose, self.n_O, self.gap0)) \
                 < model.clearance:
             return f"finger {i}'s links would cut into the object at the end of the slide"
-        drag = drag_of(model, face, self.dc)
+        drag = self.drag = drag_of(model, face, self.dc)
+        self.planned_at, self.stale = self.c0, set()
         self.plan = plan_for(model, c, obs, self.gains, sliding=i, drag=drag)
         self.rest = plan_for(model, c, obs, self.gains, sliding=i)
         self.hold = plan_for(model, c, obs, self.gains)  # the fallback of a step
@@ -136,9 +138,27 @@ class Slide:
                 and max(abs(obs.qd[2 * i]), abs(obs.qd[2 * i + 1])) <= joint_speed
                 and self.achieved(obs) is None)
 
+    def _planned(self, name: str, obs) -> GraspPlan:
+        """The force plan ``name`` (``plan``, ``rest`` or ``hold``), made again at the tips as
+        measured once the sliding tip has moved ``REPLAN_M`` along its face since the plans
+        were made: a plan's levers are where the tips were, and a grasp whose torque rests on
+        the friction across a narrow face (a pole thinner than modelled) tips over on levers
+        a slide's length stale."""
+        i, c = self.finger, self.contacts
+        _, coord = self.model.surface_gap(i, c.posture.faces[i], obs.pose, obs.q)
+        if abs(coord - self.planned_at) >= REPLAN_M:
+            self.planned_at, self.stale = coord, {"plan", "rest", "hold"}
+        if name in self.stale:
+            self.stale.discard(name)
+            kw = {"plan": {"sliding": i, "drag": self.drag}, "rest": {"sliding": i},
+                  "hold": {}}[name]
+            setattr(self, name, GraspPlan.from_state(self.model, c, obs.pose, obs.q,
+                                                     self.gains, **kw))
+        return getattr(self, name)
+
     def torques(self, obs) -> np.ndarray | None:
         model, i = self.model, self.finger
-        plan = self.plan if obs.t < self.move_s else self.rest
+        plan = self._planned("plan" if obs.t < self.move_s else "rest", obs)
         zero = np.zeros(3)
         acc, w_O = object_wrench(model, self.gains, obs.pose, obs.twist, (self.origin, zero, zero))
         lam = plan.squeeze.solve(w_O)
@@ -146,7 +166,7 @@ class Slide:
         if lam is None:
             # the drag cannot be balanced this step: every finger holds, the sliding one with
             # static friction too, and the slide goes on at the next step
-            plan, sliding = self.hold, False
+            plan, sliding = self._planned("hold", obs), False
             lam = plan.squeeze.solve(w_O)
         if lam is None:
             return None

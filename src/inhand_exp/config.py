@@ -130,10 +130,8 @@ class PrimitivesConfig:
     release_land: bool = spec(False, "Offer release / land per finger (cube).")
     flip_end_margin_m: float = spec(0.0, "Room a flipping finger keeps round the object's "
                                     "ends beyond the nominal ones (m), for an object longer "
-                                    "than modelled: 0.025 lets flips pass a pole 10 % longer "
-                                    "(in inhand-bench, 0 -> 100 % of its flips), and refuses "
-                                    "about a fifth of the flips the nominal pole allows.",
-                                    ge=0)
+                                    "than modelled; more room refuses some flips the nominal "
+                                    "object allows.", ge=0)
     repose_duration_s: float = spec(0.5, "Simulated time given to one repose (s).", gt=0)
     slide_duration_s: float = spec(0.5, "Simulated time given to one slide (s).", gt=0)
     flip_duration_s: float = spec(2.0, "Simulated time given to one flip (s).", gt=0)

@@ -11,6 +11,8 @@ start pose exactly as in a hold.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from inhand_exp.config import PrimitivesConfig
@@ -138,26 +140,31 @@ class Slide:
                 and max(abs(obs.qd[2 * i]), abs(obs.qd[2 * i + 1])) <= joint_speed
                 and self.achieved(obs) is None)
 
-    def _planned(self, name: str, obs) -> GraspPlan:
-        """The force plan ``name`` (``plan``, ``rest`` or ``hold``), made again at the tips as
-        measured once the sliding tip has moved ``REPLAN_M`` along its face since the plans
-        were made: a plan's levers are where the tips were, and a grasp whose torque rests on
-        the friction across a narrow face (a pole thinner than modelled) tips over on levers
-        a slide's length stale."""
-        i, c = self.finger, self.contacts
-        _, coord = self.model.surface_gap(i, c.posture.faces[i], obs.pose, obs.q)
+    def _mark_stale(self, obs) -> None:
+        """Once the sliding tip has moved ``REPLAN_M`` along its face since the force plans
+        were made, mark them to be made again at the tips as measured: a plan's levers are
+        where the tips were, and a grasp whose torque rests on the friction across a narrow
+        face (a pole thinner than modelled) tips over on levers a slide's length stale."""
+        i = self.finger
+        dx, dz = self.model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2]
+        c, s = math.cos(obs.pose[2]), math.sin(obs.pose[2])
+        coord = self.along_O[0] * (c * dx + s * dz) + self.along_O[1] * (c * dz - s * dx)
         if abs(coord - self.planned_at) >= REPLAN_M:
             self.planned_at, self.stale = coord, {"plan", "rest", "hold"}
+
+    def _planned(self, name: str, obs) -> GraspPlan:
+        """The force plan ``name`` (``plan``, ``rest`` or ``hold``), made again if stale."""
         if name in self.stale:
             self.stale.discard(name)
-            kw = {"plan": {"sliding": i, "drag": self.drag}, "rest": {"sliding": i},
-                  "hold": {}}[name]
-            setattr(self, name, GraspPlan.from_state(self.model, c, obs.pose, obs.q,
-                                                     self.gains, **kw))
+            kw = {"plan": {"sliding": self.finger, "drag": self.drag},
+                  "rest": {"sliding": self.finger}, "hold": {}}[name]
+            setattr(self, name, GraspPlan.from_state(self.model, self.contacts, obs.pose,
+                                                     obs.q, self.gains, **kw))
         return getattr(self, name)
 
     def torques(self, obs) -> np.ndarray | None:
         model, i = self.model, self.finger
+        self._mark_stale(obs)
         plan = self._planned("plan" if obs.t < self.move_s else "rest", obs)
         zero = np.zeros(3)
         acc, w_O = object_wrench(model, self.gains, obs.pose, obs.twist, (self.origin, zero, zero))

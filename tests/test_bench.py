@@ -154,6 +154,18 @@ def test_primitive_gains_come_from_the_config():
         100, 0.2, 0.7)
 
 
+def test_the_flip_count_uses_the_configured_primitives():
+    """``inhand-bench flips`` checks each flip with the config's primitives: more room round
+    the ends (``flip_end_margin_m``) refuses some flips the nominal ends allow."""
+    from inhand_exp.bench.cli import load_config
+    from inhand_exp.bench.flips import flip_conditions
+
+    nominal = flip_conditions(load_config("pole", []), 20, 0)
+    wider = flip_conditions(load_config("pole", ["primitives.flip_end_margin_m=0.025"]), 20, 0)
+    assert nominal["checked"] == wider["checked"]
+    assert 0 < wider["accepted"] < nominal["accepted"]
+
+
 def test_reach_splits_the_cube_goals_by_posture(capsys):
     """The cube study's start; the goals its posture holds and the others, each with how many
     the search reaches."""

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from inhand_exp.config import HandConfig, ObjectConfig
+from inhand_exp.control import joint_path as jp
 from inhand_exp.control.clearance import (
     lowest_corner,
     segment_box_distance,
@@ -63,6 +64,28 @@ def test_joint_path_round_the_lower_end_stays_clear(model):
     q_end, qd_end, _ = path.reference(1.0)
     np.testing.assert_allclose(q_end, goal)
     np.testing.assert_allclose(qd_end, 0.0)
+
+
+def test_a_chain_that_cuts_a_corner_is_searched_again_on_a_finer_grid(model):
+    """Finger 2 round the lower end of a pole held high and tilted (a state of a hard episode):
+    the chain of free cells on the coarse grid cuts the pole's corner between two cell centres,
+    so its segments fail the dense check; the search on the grid twice as fine finds a way,
+    and every point of it is clear."""
+    pose = np.array([0.011, 0.428, 0.138])
+    start, goal = np.array([2.59, -1.08]), np.array([1.11, 1.25])
+    space = FreeSpace(model, 2, pose, margin=0.006)
+    assert space.ok(start) and space.ok(goal)
+    chain = jp._chain(space, start, goal)
+    assert chain is not None  # connected on the coarse grid ...
+    coarse = [start, *(space.cell_q(c) for c in jp._corners(chain)), goal]
+    assert jp._shorten(space, coarse) is None  # ... but not along straight segments
+    way = plan_joint_path(space, start, goal)
+    assert way is not None and space.finer.n == 2 * space.n
+    np.testing.assert_array_equal(way[0], start)
+    np.testing.assert_array_equal(way[-1], goal)
+    for a, b in zip(way, way[1:], strict=False):
+        for s in np.linspace(0, 1, 60):
+            assert space.ok(a + (b - a) * s)
 
 
 def test_no_path_when_the_pole_is_too_low(model):

@@ -13,6 +13,7 @@ from collections import Counter
 import numpy as np
 from omegaconf import DictConfig
 
+from inhand_exp.config import PrimitivesConfig, typed
 from inhand_exp.control.execute import Observation
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.hand import HandModel
@@ -25,6 +26,7 @@ def flip_conditions(cfg: DictConfig, grasps: int, seed: int) -> dict:
     the object angles (rad) of the states checked and of those accepted, in bins."""
     model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
     ws = Workspace.from_config(cfg.task)
+    gains = typed(cfg.primitives, PrimitivesConfig)
     rng = np.random.default_rng(seed)
     why: Counter[str] = Counter()
     angles, accepted = [], []
@@ -35,7 +37,7 @@ def flip_conditions(cfg: DictConfig, grasps: int, seed: int) -> dict:
             if contacts.posture.faces[a] == contacts.posture.faces[b]:
                 continue  # not offered: the staying pair must oppose
             obs = Observation(q, np.zeros(6), pose, np.zeros(3), 0.0)
-            refusal = Flip(model, contacts, finger, cfg.primitives.flip_duration_s).start(obs)
+            refusal = Flip(model, contacts, finger, gains.flip_duration_s, gains).start(obs)
             angles.append(float(pose[2]))
             if refusal is None:
                 why["accepted"] += 1

@@ -9,7 +9,8 @@ joint space can.
 
 ``plan_joint_path`` searches a grid over the joint limits (Dijkstra, 8-connected) for joint
 angles whose links and tip keep a margin of air to the object and stay above
-the palm, then shortens the path and checks every segment densely. ``JointPath`` follows
+the palm, then shortens the path and checks every segment densely; when that check fails, it
+searches again on a grid twice as fine. ``JointPath`` follows
 waypoints with one minimum-jerk move per segment and a joint-space PD with feed-forward.
 """
 
@@ -28,6 +29,7 @@ from inhand_exp.control.repose import min_jerk
 
 SCALAR_POINTS = 8  # segments checked at fewer points than this are checked point by point
 STEP_RAD = 0.02  # a segment is checked at points at most this far apart in joint space
+FINEST_CELLS = 112  # the finest grid a path is searched on (cells per joint)
 
 
 def segment_points(a: np.ndarray, b: np.ndarray, step_rad: float = STEP_RAD) -> np.ndarray:
@@ -97,6 +99,11 @@ class FreeSpace:
         air = math.hypot(max(abs(x) - hx, 0.0), max(abs(z) - hz, 0.0))
         return air >= m.tip_radius + self.margin and tip[1] >= m.fingers[i].base_z + m.tip_radius
 
+    @functools.cached_property
+    def finer(self) -> FreeSpace:
+        """The same free space on a grid of twice as many cells per joint."""
+        return FreeSpace(self.model, self.finger, self.pose, self.margin, cells=2 * self.n)
+
     def cell_q(self, cell: tuple[int, int]) -> np.ndarray:
         return self.lo + self.step * np.array(cell)
 
@@ -161,17 +168,30 @@ class FreeSpace:
 
 def plan_joint_path(space: FreeSpace, q_start: np.ndarray, q_goal: np.ndarray
                     ) -> list[np.ndarray] | None:
-    """Joint waypoints from ``q_start`` to ``q_goal`` through free space, or None."""
+    """Joint waypoints from ``q_start`` to ``q_goal`` through free space, or None.
+
+    A chain of free cells can still fail the dense check of its segments: between two free
+    cell centres a straight run may cut the corner of the object. The search is then made
+    again on the grid of twice the resolution (``FreeSpace.finer``), built only for this.
+    """
     if space.segment_ok(q_start, q_goal):
         return [q_start, q_goal]
+    cells = _chain(space, q_start, q_goal)
+    if cells is None:
+        return None
+    path = _shorten(space, [q_start, *(space.cell_q(c) for c in _corners(cells)), q_goal])
+    if path is not None or space.n >= FINEST_CELLS:
+        return path
+    return plan_joint_path(space.finer, q_start, q_goal)
+
+
+def _chain(space: FreeSpace, q_start: np.ndarray, q_goal: np.ndarray
+           ) -> list[tuple[int, int]] | None:
+    """The free cells from the one nearest ``q_start`` to the one nearest ``q_goal``."""
     start, goal = space.nearest_free(q_start), space.nearest_free(q_goal)
     if start is None or goal is None:
         return None
-    cells = space.cells_between(start, goal)
-    if cells is None:
-        return None
-    path = [q_start, *(space.cell_q(c) for c in _corners(cells)), q_goal]
-    return _shorten(space, path)
+    return space.cells_between(start, goal)
 
 
 def _corners(cells: list[tuple[int, int]]) -> list[tuple[int, int]]:

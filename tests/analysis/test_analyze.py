@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -133,10 +134,27 @@ def test_robustness_rows_give_the_change_from_the_trained_object():
     assert out.loc[("none", "none"), "vs_trained"] == pytest.approx(0.0)
     # the paper's own change (Table III: 91.0 % thinner against 93.2 % with noise)
     assert out.loc[("paper", "thinner"), "paper_vs_trained"] == pytest.approx(0.910 - 0.932)
+    # paired over the ten pairs: the trained object alone solved two (k = 7, 8), the
+    # heavier pole none alone: sqrt(2 - 2^2 / 10) / 10
+    assert out.loc[("none", "heavier"), "vs_trained_se"] == pytest.approx(np.sqrt(1.6) / 10)
+    assert out.loc[("none", "none"), "vs_trained_se"] == 0.0
     text = tables.render(out.reset_index(), "robustness")
-    assert "vs trained object" in text and "| -20.0 pts |" in text
+    assert "vs trained object" in text and "| -20.0 ± 12.6 pts |" in text
     alone = tables.build(pd.DataFrame(rows[10:20]), "robustness")  # no trained-object row
     assert alone["vs_trained"].isna().all() and "| - |" in tables.render(alone, "robustness")
+
+
+def test_the_paired_error_leaves_out_pairs_drawn_again_for_the_perturbation():
+    """A pair the perturbed pole was given again (another X0) is not compared with the
+    trained object's; the rest are, episode by episode."""
+    rows = [episode(k, "medium", k < 8, seed=0) | {"variant": "default"} for k in range(10)]
+    thin = [episode(k, "medium", k in (0, 1, 8, 9), seed=0)
+            | {"perturb": "thinner", "variant": "default"} for k in range(10)]
+    thin[9]["x0"] = [0.01, 0.3, 0.0]  # drawn again: it does not count
+    se = tables.paired_se(pd.DataFrame(rows + thin))
+    # nine pairs: the trained object alone solved k = 2..7 (6), the thinner pole alone k = 8
+    assert se[("ppo", "default", "none", "thinner")] == pytest.approx(
+        np.sqrt(7 - 5 ** 2 / 9) / 9)
 
 
 def test_cli_refuses_paths_without_logs(tmp_path, capsys):

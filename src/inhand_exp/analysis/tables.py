@@ -90,22 +90,51 @@ def build(episodes: pd.DataFrame, table: str) -> pd.DataFrame:
                  "avg_time_s": "paper_time_s"})
     out = out.merge(ref, on=[k for k in keys if k != "variant"], how="left")
     if table == "robustness":
-        out = _vs_trained(out)
+        out = _vs_trained(out, eps)
     return out
 
 
-def _vs_trained(rows: pd.DataFrame) -> pd.DataFrame:
+SAME = ["learner", "variant", "noise"]  # what a Table III row is compared within
+
+
+def _vs_trained(rows: pd.DataFrame, episodes: pd.DataFrame) -> pd.DataFrame:
     """Each row's success minus that of the trained object (``perturb=none``) of the same
     learner, variant and noise, ours and the paper's (Table III's comparison; NaN where the
-    trained object was not evaluated)."""
-    same = ["learner", "variant", "noise"]
-    base = rows[rows["perturb"] == "none"].set_index(same)
-    idx = pd.MultiIndex.from_frame(rows[same])
+    trained object was not evaluated), with the standard error of ours over the pairs both
+    evaluated (``paired_se``)."""
+    base = rows[rows["perturb"] == "none"].set_index(SAME)
+    idx = pd.MultiIndex.from_frame(rows[SAME])
     rows = rows.copy()
     for col, name in (("success_rate_mean", "vs_trained"), ("paper_success", "paper_vs_trained")):
         ref = base[col].reindex(idx).to_numpy(dtype=float)
         rows[name] = rows[col].to_numpy(dtype=float) - ref
+    se = paired_se(episodes)
+    keys = [*SAME, "perturb"]
+    rows["vs_trained_se"] = se.reindex(pd.MultiIndex.from_frame(rows[keys])).to_numpy(float)
     return rows
+
+
+def paired_se(episodes: pd.DataFrame) -> pd.Series:
+    """Standard error of each perturbed setting's success minus the trained object's, from
+    the test pairs both evaluated (the same seed, episode, X0 and Xg; a pair the perturbed
+    object was given again is left out): ``sqrt(b + c - (c - b)^2 / n) / n`` with ``b`` the
+    pairs only the trained object solved and ``c`` those only the perturbed one did. A
+    difference smaller than about twice this is within what the same policy gives run to run.
+    Indexed by learner, variant, noise and perturb."""
+    if episodes.empty:
+        return pd.Series(dtype=float)
+    eps = episodes.assign(pair=episodes["x0"].astype(str) + episodes["xg"].astype(str))
+    match = [*SAME, "seed", "episode", "pair"]
+    base = eps[eps["perturb"] == "none"][[*match, "success"]]
+    both = eps.merge(base, on=match, suffixes=("", "_trained"))
+    out = {}
+    for key, g in both.groupby([*SAME, "perturb"], dropna=False):
+        n = len(g)
+        b = int((g["success_trained"] & ~g["success"]).sum())
+        c = int((g["success"] & ~g["success_trained"]).sum())
+        out[key] = np.sqrt(max(b + c - (c - b) ** 2 / n, 0.0)) / n
+    names = [*SAME, "perturb"]
+    return pd.Series(out, dtype=float).rename_axis(names) if out else pd.Series(dtype=float)
 
 
 def paper_rank(column: pd.Series) -> pd.Series:
@@ -135,8 +164,10 @@ def _ref(v: float, pct: bool) -> str:
     return "-" if pd.isna(v) else (f"{v * 100:.1f} %" if pct else f"{v:.2f}")
 
 
-def _points(v: float) -> str:
-    return "-" if pd.isna(v) else f"{v * 100:+.1f} pts"
+def _points(v: float, se: float = np.nan) -> str:
+    if pd.isna(v):
+        return "-"
+    return f"{v * 100:+.1f} pts" if pd.isna(se) else f"{v * 100:+.1f} ± {se * 100:.1f} pts"
 
 
 def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
@@ -159,7 +190,8 @@ def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
             str(int(r["seeds"])), str(int(r["episodes"])),
             _cell(r["success_rate_mean"], r["success_rate_std"], True),
             _ref(r.get("paper_success"), True),
-            *((_points(r["vs_trained"]), _points(r["paper_vs_trained"])) if vs else ()),
+            *((_points(r["vs_trained"], r.get("vs_trained_se", np.nan)),
+               _points(r["paper_vs_trained"])) if vs else ()),
             _cell(r["drop_rate_mean"], r["drop_rate_std"], True), _ref(r.get("paper_drop"), True),
             _cell(r["timeout_rate_mean"], r["timeout_rate_std"], True),
             _cell(r["avg_time_s_mean"], r["avg_time_s_std"], False),

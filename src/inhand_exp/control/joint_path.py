@@ -176,13 +176,14 @@ def plan_joint_path(space: FreeSpace, q_start: np.ndarray, q_goal: np.ndarray
     """
     if space.segment_ok(q_start, q_goal):
         return [q_start, q_goal]
-    cells = _chain(space, q_start, q_goal)
-    if cells is None:
-        return None
-    path = _shorten(space, [q_start, *(space.cell_q(c) for c in _corners(cells)), q_goal])
-    if path is not None or space.n >= FINEST_CELLS:
-        return path
-    return plan_joint_path(space.finer, q_start, q_goal)
+    while True:
+        cells = _chain(space, q_start, q_goal)
+        if cells is None:
+            return None
+        path = _shorten(space, [q_start, *(space.cell_q(c) for c in _corners(cells)), q_goal])
+        if path is not None or space.n >= FINEST_CELLS:
+            return path
+        space = space.finer
 
 
 def _chain(space: FreeSpace, q_start: np.ndarray, q_goal: np.ndarray

@@ -147,6 +147,10 @@ class PrimitivesConfig:
                                      gt=0)
     friction_margin: float = spec(0.8, "Fraction of the friction cone the controller may use.",
                                   gt=0)
+    min_grasp_margin: float = spec(0.02, "Least slack of a grasp's deepest squeeze (per newton "
+                                   "of total squeeze) for a repose to move it, or a slide, "
+                                   "flip or land to end in it: a weaker grasp holds the object "
+                                   "only by squeezing it tens of times its weight.", ge=0)
 
 
 @dataclass

@@ -26,7 +26,7 @@ from inhand_exp.control.execute import Outcome, execute
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.repose import Repose
+from inhand_exp.control.repose import GraspPlan, Repose, strict_hold
 from inhand_exp.control.slide import Slide
 from inhand_exp.sim.world import World
 
@@ -218,6 +218,56 @@ def test_slide_infeasible_leaves_world_untouched(nominal_model, make_world, fing
     assert out.reason == "infeasible" and not out.ok, out
     assert why in out.detail and f"finger {finger}" in out.detail, out.detail
     assert_untouched(world, before, out)
+
+
+# fingers 0 and 1 on the left face, the lone finger 2 on the right above both of them, not
+# between: nothing but friction across the pole's 2 cm width resists the gravity torque
+WEAK = Contacts(Posture((L, L, R)), (-0.197, -0.073, -0.060))
+TILTED = np.array([0.02, 0.358, 0.154])  # where a medium episode's policy brought such a grasp
+
+
+def margin_of(model: HandModel, contacts: Contacts) -> float:
+    return GraspPlan.from_contacts(model, contacts, PrimitivesConfig()).squeeze.margin
+
+
+def test_a_grasp_held_only_by_friction_across_the_pole_drops_it_and_is_not_moved(
+        nominal_model, make_world):
+    """The weak grasp has a strict squeeze (``strict_hold``), but with a slack of under 1 %
+    of its total squeeze: it holds the pole at rest only by pinching it with about 28 N, 28
+    times its weight, on the edge of the cones. Held without the margin, the least wrench the
+    controller adds (a millimetre of pose error) asks for more than the force limit, and the
+    pole is dropped; with the default margin, the hold is refused and nothing moves."""
+    gains = PrimitivesConfig()
+    assert strict_hold(nominal_model, WEAK, gains)
+    assert not strict_hold(nominal_model, WEAK, gains, firm=True)
+    assert margin_of(nominal_model, WEAK) < gains.min_grasp_margin < margin_of(nominal_model,
+                                                                               BEND)
+    for pose in (TILTED, X0):
+        world = make_world(WEAK, pose)
+        loose = PrimitivesConfig(min_grasp_margin=0.0)
+        out = execute(world, Repose(nominal_model, WEAK, np.zeros(3), REPOSE_S, loose))
+        assert out.dropped, out
+        world = make_world(WEAK, pose)
+        before = snapshot(world)
+        out = execute(world, Repose(nominal_model, WEAK, np.zeros(3), REPOSE_S, gains))
+        assert out.reason == "infeasible" and "too weak" in out.detail, out
+        assert_untouched(world, before, out)
+
+
+def test_a_slide_may_not_end_in_a_weak_grasp(nominal_model, make_world):
+    """Finger 0 sliding down the pole, away from the lone finger, weakens the grasp step by
+    step: the slide is refused once it would end below the margin, and accepted without it."""
+    start = WEAK.moved(0, coord=-0.097)
+    end = WEAK.moved(0, coord=-0.117)
+    assert margin_of(nominal_model, start) > 0.02 > margin_of(nominal_model, end) > 0.01
+    for least, refused in ((0.02, True), (0.01, False)):
+        gains = PrimitivesConfig(min_grasp_margin=least)
+        world = make_world(start, X0)
+        out = execute(world, Slide(nominal_model, start, 0, -SLIDE_DC, SLIDE_S, gains))
+        if refused:
+            assert out.reason == "infeasible" and "firmly" in out.detail, out
+        else:
+            assert out.reason == "done", out
 
 
 def test_the_lone_finger_slides_up_an_upright_pole_but_never_down(nominal_model):

@@ -229,7 +229,8 @@ class Flip:
                                      pose, R, model.clearance, prefer=branch,
                                      check_pose=at_new)
             if q_hover is None or not space.ok(q_hover) or not strict_hold(
-                    model, self.contacts.moved(i, coord=coord, face=new_face), self.gains):
+                    model, self.contacts.moved(i, coord=coord, face=new_face), self.gains,
+                    firm=True):
                 continue
             tries += 1
             way = plan_joint_path(space, q_lift, q_hover)

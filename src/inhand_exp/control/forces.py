@@ -73,12 +73,13 @@ def _deepest_squeeze(Gr: np.ndarray, fn: np.ndarray, fric: np.ndarray, mu: float
     return (x[:m], float(x[m])) if x is not None else (np.zeros(m), 0.0)
 
 
-def has_strict_squeeze(G: np.ndarray, mu: float) -> bool:
+def has_strict_squeeze(G: np.ndarray, mu: float, least: float = MARGIN) -> bool:
     """True when an internal force lies strictly inside every friction cone (what
-    ``Squeeze.build(G, mu, ...).usable`` says, without building the rest of the plan)."""
+    ``Squeeze.build(G, mu, ...).usable`` says, without building the rest of the plan), with a
+    slack of more than ``least`` (its ``margin``)."""
     k = G.shape[1] // 2
     _, margin = _deepest_squeeze(G, np.arange(0, 2 * k, 2), np.arange(2 * k).reshape(-1, 2), mu)
-    return margin > MARGIN
+    return margin > max(least, MARGIN)
 
 
 def strict_span(G0: np.ndarray, col: int, k: float, mu: float, bound: float

@@ -111,7 +111,7 @@ class Land:
         tip_O = R.T @ (model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2])
         for _, face, coord, path in self._candidates(tip_O):
             if not strict_hold(model, self.contacts.moved(i, coord=coord, face=face,
-                                                          active=True), self.gains):
+                                                          active=True), self.gains, firm=True):
                 continue
             tracker = PathTracker(path, self.times["travel"][0], self.times["touch"][1])
             if tracker.reachable(model, i, self.elbow, obs.pose, R):

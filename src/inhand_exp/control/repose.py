@@ -121,12 +121,27 @@ def face_gaps(model: HandModel, contacts, obs) -> tuple[float, ...]:
     return gaps
 
 
-def strict_hold(model: HandModel, contacts: Contacts, gains: PrimitivesConfig) -> bool:
+def strict_hold(model: HandModel, contacts: Contacts, gains: PrimitivesConfig,
+                firm: bool = False) -> bool:
     """True when ``contacts`` (as commanded, active fingers only) admit a squeeze strictly inside
-    the friction cones: the grasp holds whatever the small wrenches a controller asks for."""
+    the friction cones: the grasp holds whatever the small wrenches a controller asks for.
+    ``firm``: with a slack of at least ``gains.min_grasp_margin`` too, what a primitive asks of
+    the grasp it ends in (``firm_enough``)."""
     act = [i for i in range(3) if contacts.active[i]]
     pts, nrm = contact_frames(model.shape, contacts, np.zeros(3))
-    return has_strict_squeeze(grasp_matrix(pts[act], nrm[act]), model.mu * gains.friction_margin)
+    return has_strict_squeeze(grasp_matrix(pts[act], nrm[act]), model.mu * gains.friction_margin,
+                              gains.min_grasp_margin if firm else 0.0)
+
+
+def firm_enough(squeeze: Squeeze, gains: PrimitivesConfig) -> bool:
+    """False for a grasp with a strict squeeze whose slack (``Squeeze.margin``: the least
+    slack, per newton of total squeeze, of the squeeze deepest inside the cones) is below
+    ``gains.min_grasp_margin``. Such a grasp holds the object at rest only with a squeeze tens
+    of times its weight, its forces on the edge of the cones, and the least wrench the
+    controller asks for on top (a pose error of a millimetre) needs more: moved in that state,
+    the object is shot out of the hand. A grasp without a strict squeeze (held by gravity, or
+    by two fingers) is judged by its force plans alone."""
+    return not squeeze.usable or squeeze.margin >= gains.min_grasp_margin
 
 
 def landing_span(model: HandModel, contacts: Contacts, finger: int, face, gains: PrimitivesConfig
@@ -287,6 +302,9 @@ class Repose:
                                (obs.pose, np.zeros(3), np.zeros(3)))
         if self.plan.squeeze.solve(w_O) is None:
             return "no contact forces inside the friction cones hold the object here"
+        if not firm_enough(self.plan.squeeze, self.gains):
+            return (f"the grasp is too weak to move the object (squeeze slack "
+                    f"{self.plan.squeeze.margin:.3f} < {self.gains.min_grasp_margin})")
         self.origin = obs.pose.copy()
         self.goal = self.origin + self.delta
         if self.model.palm_gap(self.goal) < self.model.clearance:

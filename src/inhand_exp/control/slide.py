@@ -117,8 +117,8 @@ class Slide:
                                self.max_push)
         if refused:
             return refused
-        if not strict_hold(model, c.moved(i, coord=self.c1), self.gains):
-            return f"the grasp after the slide of finger {i} cannot hold the object"
+        if not strict_hold(model, c.moved(i, coord=self.c1), self.gains, firm=True):
+            return f"the grasp after the slide of finger {i} cannot hold the object firmly"
         self.origin = obs.pose.copy()
         return None
 

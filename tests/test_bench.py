@@ -155,15 +155,18 @@ def test_primitive_gains_come_from_the_config():
 
 
 def test_the_flip_count_uses_the_configured_primitives():
-    """``inhand-bench flips`` checks each flip with the config's primitives: more room round
-    the ends (``flip_end_margin_m``) refuses some flips the nominal ends allow."""
+    """``inhand-bench flips`` checks each flip with the config's primitives. Room round the
+    ends (``flip_end_margin_m``) is kept where a path has it and never costs a flip: the
+    flips accepted are those the nominal ends allow, and only some of them keep the room."""
     from inhand_exp.bench.cli import load_config
     from inhand_exp.bench.flips import flip_conditions
 
-    nominal = flip_conditions(load_config("pole", []), 20, 0)
+    nominal = flip_conditions(load_config("pole", ["primitives.flip_end_margin_m=0"]), 20, 0)
     wider = flip_conditions(load_config("pole", ["primitives.flip_end_margin_m=0.025"]), 20, 0)
     assert nominal["checked"] == wider["checked"]
-    assert 0 < wider["accepted"] < nominal["accepted"]
+    assert nominal["accepted"] == wider["accepted"] > 0
+    assert nominal["accepted_with_end_margin"] == 0
+    assert 0 < wider["accepted_with_end_margin"] < wider["accepted"]
 
 
 def test_reach_splits_the_cube_goals_by_posture(capsys):

@@ -128,10 +128,11 @@ class PrimitivesConfig:
     slide: bool = spec(True, "Offer the slide actions (6 for the pole).")
     flip: bool = spec(True, "Offer flip-left / flip-right (pole).")
     release_land: bool = spec(False, "Offer release / land per finger (cube).")
-    flip_end_margin_m: float = spec(0.0, "Room a flipping finger keeps round the object's "
+    flip_end_margin_m: float = spec(0.025, "Room a flipping finger keeps round the object's "
                                     "ends beyond the nominal ones (m), for an object longer "
-                                    "than modelled; more room refuses some flips the nominal "
-                                    "object allows.", ge=0)
+                                    "than modelled, whose ends no fingertip feels. Taken "
+                                    "where a path with it exists; a flip that has none passes "
+                                    "the nominal ends.", ge=0)
     repose_duration_s: float = spec(0.5, "Simulated time given to one repose (s).", gt=0)
     slide_duration_s: float = spec(0.5, "Simulated time given to one slide (s).", gt=0)
     flip_duration_s: float = spec(2.0, "Simulated time given to one flip (s).", gt=0)

@@ -128,6 +128,8 @@ class Flip:
     strictly inside the friction cones (a grasp that only gravity makes feasible proved fragile
     while the force is handed over), where the finger touches with its links clear and where a
     path in the finger's joint space (``joint_path``) gets it there without touching the object.
+    Round the ends the path keeps ``flip_end_margin_m`` more room where such a path exists
+    (``end_margin`` says which it took): a pole longer than modelled has its real ends there.
     """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
@@ -192,27 +194,44 @@ class Flip:
                  ) -> tuple[float, JointPath] | None:
         """The landing coordinate and the finger's joint path, nearest the present first."""
         model, i = self.model, self.finger
-        shape, r = model.shape, model.tip_radius
-        new_face = OPPOSITE[face]
-        here = self.contacts.coords[i]
-        n = int((shape.half_extent(new_face) - 2 * r) // step_m)
         pose, R = obs.pose, rotation(obs.pose[2])
-        span = landing_span(model, self.contacts, i, new_face, self.gains)
+        span = landing_span(model, self.contacts, i, OPPOSITE[face], self.gains)
         if span is None:
             return None
-        lo, hi = span[0] - SPAN_TOL_M, span[1] + SPAN_TOL_M
         q0 = obs.q[2 * i:2 * i + 2].copy()
         inward, _ = face_axes(face)
         lift_O = self.full.tips_O[self.full.fingers.index(i)] - self.clearance * inward
         q_lift = self._ik_clear(lift_O, pose, R, model.clearance, prefer=self.elbow)
         if q_lift is None:
             return None
-        # the travel keeps its air to the faces where they were found, if further out
-        # and passes round the ends flip_end_margin_m further out (a longer pole)
-        space = FreeSpace(model.lengthened(self.gains.flip_end_margin_m), i, pose,
-                          self.air + max(0.0, self.gap_old, self.gap_new))
+        air = self.air + max(0.0, self.gap_old, self.gap_new)
+        # the travel keeps its air to the faces where they were found, if further out; round
+        # the ends it keeps flip_end_margin_m more where it can (a pole longer than modelled).
+        # The free space with the margin lies inside the one without, so a flip the nominal
+        # ends refuse is refused at once, and one they allow tries the margin second.
+        found = self._path(FreeSpace(model, i, pose, air), pose, q0, q_lift, span, step_m)
+        self.end_margin = 0.0
+        margin = self.gains.flip_end_margin_m
+        if found is not None and margin > 0:
+            wider = self._path(FreeSpace(model.lengthened(margin), i, pose, air), pose, q0,
+                               q_lift, span, step_m)
+            if wider is not None:
+                found, self.end_margin = wider, margin
+        return found
+
+    def _path(self, space: FreeSpace, pose: np.ndarray, q0: np.ndarray, q_lift: np.ndarray,
+              span: tuple[float, float], step_m: float) -> tuple[float, JointPath] | None:
+        """The landing nearest the finger's present coordinate that holds the object and whose
+        hover ``space`` reaches from ``q_lift``, with the joint path from ``q0`` to it."""
+        model, i = self.model, self.finger
         if not space.ok(q_lift):
             return None
+        shape, r = model.shape, model.tip_radius
+        new_face = OPPOSITE[self.contacts.posture.faces[i]]
+        here = self.contacts.coords[i]
+        n = int((shape.half_extent(new_face) - 2 * r) // step_m)
+        R = rotation(pose[2])
+        lo, hi = span[0] - SPAN_TOL_M, span[1] + SPAN_TOL_M
         hx, hz = shape.half_x, shape.half_z
         g = self.gap_new
         at_new = face_shifted(pose, face_axes(new_face)[0], g)

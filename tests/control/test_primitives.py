@@ -22,7 +22,7 @@ from inhand_exp.config import (
     PrimitivesConfig,
     SimConfig,
 )
-from inhand_exp.control.execute import Outcome, execute
+from inhand_exp.control.execute import Observation, Outcome, execute
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import GeometryError, HandModel
@@ -58,6 +58,13 @@ def contact_coords(world: World) -> np.ndarray:
 def touching(world: World) -> set[int]:
     """Fingers with a PyBullet contact point on the object after the last step."""
     return {c.finger for c in world.contacts()}
+
+
+def observe(world: World) -> Observation:
+    """The simulated state as a primitive's ``start`` sees it."""
+    pose, twist = world.object_state()
+    q, qd = world.joint_state()
+    return Observation(q, qd, pose, twist, 0.0)
 
 
 def pushes_right(world: World) -> dict[int, bool]:
@@ -276,7 +283,6 @@ def test_the_lone_finger_slides_up_an_upright_pole_but_never_down(nominal_model)
     the weight plus the sliding finger's drag, mu times it when it slides down. Over random held
     grasps, no downward slide of the lone finger is accepted; upward ones and the paired
     fingers' downward ones are, in some grasps."""
-    from inhand_exp.control.execute import Observation
     from inhand_exp.control.sample import Workspace, lone_finger, random_grasp
 
     rng = np.random.default_rng(4)
@@ -572,6 +578,22 @@ assert LONGER.length_scale > 1
 
 
 @pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))
+def test_a_flip_keeps_room_round_the_end_where_it_can_and_passes_the_nominal_end_where_not(
+        nominal_model, make_world, finger):
+    """At XF the finger has no way under the pole with 2.5 cm more room round its end (the
+    palm is in the way) and passes the nominal end; 2 cm higher it keeps the room. The room
+    never costs a flip: with it off, the same flips are offered."""
+    contacts = FLIP_SETUPS[finger]
+    for lift, room in ((0.0, 0.0), (0.02, 0.025)):
+        world = make_world(contacts, XF + np.array([0.0, lift, 0.0]))
+        for gains, kept in ((PrimitivesConfig(), room),
+                            (PrimitivesConfig(flip_end_margin_m=0.0), 0.0)):
+            flip = Flip(nominal_model, contacts, finger, FLIP_S, gains)
+            assert flip.start(observe(world)) is None, (lift, gains.flip_end_margin_m)
+            assert flip.end_margin == kept, (lift, gains.flip_end_margin_m)
+
+
+@pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))
 def test_a_flip_passes_a_longer_poles_end_with_the_flip_end_margin(nominal_model, make_world,
                                                                    finger):
     """The flipping finger goes round the pole's lower end. On a pole 10 % longer than
@@ -625,14 +647,10 @@ def test_flip_landing_is_the_same_without_the_span_pruning(nominal_model, make_w
                                                           monkeypatch, finger, shift):
     """``landing_span`` only skips landing places that cannot hold: the flip plans the same."""
     import inhand_exp.control.flip as flip_module
-    from inhand_exp.control.execute import Observation
 
     base = FLIP_SETUPS[finger]
     contacts = base.moved(finger, coord=base.coords[finger] + shift)
-    world = make_world(contacts, XF)
-    pose, twist = world.object_state()
-    q, qd = world.joint_state()
-    obs = Observation(q, qd, pose, twist, 0.0)
+    obs = observe(make_world(contacts, XF))
     pruned = Flip(nominal_model, contacts, finger, FLIP_S)
     why = pruned.start(obs)
     monkeypatch.setattr(flip_module, "landing_span", lambda *a: (-math.inf, math.inf))

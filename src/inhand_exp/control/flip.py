@@ -143,6 +143,7 @@ class Flip:
         self.kp, self.kd = kp_joint, kd_joint
         self.max_plans = max_plans  # landings whose path is searched for, nearest first
         self.air = air_m  # margin of the travel round the object (links and tip)
+        self.end_margin = 0.0  # the room round the ends the planned path keeps (set by start)
         self.times = phase_times(duration_s, PHASES)
 
     @property
@@ -207,8 +208,8 @@ class Flip:
         air = self.air + max(0.0, self.gap_old, self.gap_new)
         # the travel keeps its air to the faces where they were found, if further out; round
         # the ends it keeps flip_end_margin_m more where it can (a pole longer than modelled).
-        # The free space with the margin lies inside the one without, so a flip the nominal
-        # ends refuse is refused at once, and one they allow tries the margin second.
+        # The free space with the margin lies inside the one without: a flip is offered when
+        # the nominal ends allow it, and only then is the margin tried.
         found = self._path(FreeSpace(model, i, pose, air), pose, q0, q_lift, span, step_m)
         self.end_margin = 0.0
         margin = self.gains.flip_end_margin_m

@@ -333,3 +333,23 @@ def test_an_upright_poles_lone_finger_has_no_slide_edge_down(compose_cfg, tmp_pa
         ways[lone, bool(b[1 + f] > a[1 + f])] += 1  # the coordinate grows up the pole
     assert ways[True, False] == 0, ways
     assert min(ways[True, True], ways[False, True], ways[False, False]) > 0, ways
+
+
+def test_the_graph_holds_only_grasps_the_primitives_may_move(compose_cfg, tmp_path):
+    """A node's contacts have the slack a repose asks of the grasp it moves
+    (``primitives.min_grasp_margin``): asking for more slack leaves fewer nodes, all firm."""
+    from inhand_exp.config import PrimitivesConfig, typed
+    from inhand_exp.control.repose import strict_hold
+
+    def graph(margin: float) -> tuple[Search, PoseGraph]:
+        search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}",
+                                    f"primitives.min_grasp_margin={margin}"))
+        return search, search.ensure_graph()
+
+    _, loose = graph(0.0)
+    firm, g = graph(0.1)
+    assert 0 < g.matrix.shape[0] < loose.matrix.shape[0]
+    prim = typed(firm.cfg.primitives, PrimitivesConfig)
+    for p, *k in {(ix[0], *ix[1:4]) for ix, n in np.ndenumerate(g.ids) if n >= 0}:
+        contacts = Contacts(g.postures[p], tuple(float(g.lattice.cs[j]) for j in k))
+        assert strict_hold(firm.model, contacts, prim, firm=True), contacts

@@ -6,7 +6,8 @@ task's workspace, contact coordinates on a lattice of ``contact_resolution_m`` a
 long faces, and every posture (which face each finger is on). A cell is a node when, by the
 controllers' own model, every finger reaches its contact within its joint limits with its links
 clear of the object and the palm, the object clears the palm, and the three contacts can squeeze
-it inside the friction cones (``sample.face_coords`` per finger, ``repose.strict_hold``).
+it inside the friction cones with the slack the primitives ask of a grasp they move or end in
+(``sample.face_coords`` per finger, ``repose.strict_hold`` with ``firm``).
 
 Edges join neighbouring nodes by one primitive:
 
@@ -280,7 +281,8 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
         squeeze = squeezes[p]
         for k in itertools.product(range(K), repeat=3):
             squeeze[k] = strict_hold(model, Contacts(posture, tuple(float(lat.cs[j])
-                                                                    for j in k)), prim)
+                                                                    for j in k)), prim,
+                                     firm=True)
         valid[p] = (squeeze[:, :, :, None, None, None]
                     & F[0, s[0]][:, None, None] & F[1, s[1]][None, :, None]
                     & F[2, s[2]][None, None, :] & palm)

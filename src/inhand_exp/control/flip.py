@@ -211,7 +211,6 @@ class Flip:
         # The free space with the margin lies inside the one without: a flip is offered when
         # the nominal ends allow it, and only then is the margin tried.
         found = self._path(FreeSpace(model, i, pose, air), pose, q0, q_lift, span, step_m)
-        self.end_margin = 0.0
         margin = self.gains.flip_end_margin_m
         if found is not None and margin > 0:
             wider = self._path(FreeSpace(model.lengthened(margin), i, pose, air), pose, q0,

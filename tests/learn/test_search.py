@@ -347,9 +347,9 @@ def test_the_graph_holds_only_grasps_the_primitives_may_move(compose_cfg, tmp_pa
         return search, search.ensure_graph()
 
     _, loose = graph(0.0)
-    firm, g = graph(0.1)
-    assert 0 < g.matrix.shape[0] < loose.matrix.shape[0]
-    prim = typed(firm.cfg.primitives, PrimitivesConfig)
-    for p, *k in {(ix[0], *ix[1:4]) for ix, n in np.ndenumerate(g.ids) if n >= 0}:
-        contacts = Contacts(g.postures[p], tuple(float(g.lattice.cs[j]) for j in k))
-        assert strict_hold(firm.model, contacts, prim, firm=True), contacts
+    search, firm = graph(0.1)
+    assert 0 < firm.matrix.shape[0] < loose.matrix.shape[0]
+    prim = typed(search.cfg.primitives, PrimitivesConfig)
+    for p, *k in {(ix[0], *ix[1:4]) for ix, n in np.ndenumerate(firm.ids) if n >= 0}:
+        contacts = Contacts(firm.postures[p], tuple(float(firm.lattice.cs[j]) for j in k))
+        assert strict_hold(search.model, contacts, prim, firm=True), contacts

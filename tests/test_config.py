@@ -57,7 +57,7 @@ def test_defaults_are_the_paper_setting(compose_cfg):
     assert (cfg.object.name, cfg.primitives.name, cfg.learner.name) == ("pole", "pole", "ppo")
     assert (cfg.perturb.name, cfg.noise.name) == ("none", "none")
     assert cfg.task.filter.value == "mask" and cfg.train.num_envs == 16
-    assert cfg.eval.episodes == 50 and cfg.train.frames == 1024
+    assert cfg.eval.episodes == 100 and cfg.train.frames == 1024
 
 
 def test_object_choice_selects_matching_primitives(compose_cfg):

@@ -284,7 +284,7 @@ class TrainConfig:
 
 @dataclass
 class EvalConfig:
-    episodes: int = spec(50, "Episodes per goal group (the paper: 500).", gt=0)
+    episodes: int = spec(100, "Episodes per goal group (the paper: 500).", gt=0)
     goals_file: str | None = spec(None, "CSV/Parquet goal set to evaluate on instead.")
     sample: bool = spec(True, "Draw each action from the policy, as it was trained (seeded from "
                         "seed); false: take its most likely action, which can cycle.")

@@ -164,6 +164,35 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
         assert not run_dir.exists(), args  # a refused run writes nothing
 
 
+def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path):
+    from inhand_exp.analysis.frames import load
+    from inhand_exp.experiment import merged
+
+    train = inhand_exp("mode=train", "task.reward_progress=0.1",
+                       f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
+    assert train.returncode == 0, train.stderr
+    trained = run_config(tmp_path / "train" / "run.mcap")
+    assert trained["policy_overrides"] == merged([], trained["overrides"])  # one per key
+    moved = tmp_path / "elsewhere" / "actor.pt"  # no .hydra beside it
+    moved.parent.mkdir()
+    moved.write_bytes((tmp_path / "train" / "policy.pt").read_bytes())
+    ev = inhand_exp("mode=eval", f"checkpoint={moved}", f"hydra.run.dir={tmp_path / 'ev'}",
+                    cwd=tmp_path)
+    assert ev.returncode == 0, ev.stderr
+    assert run_config(tmp_path / "ev" / "run.mcap")["policy_overrides"] == \
+        trained["policy_overrides"]
+    more = inhand_exp("mode=train", f"checkpoint={moved}", "task.reward_progress=0.2",
+                      f"hydra.run.dir={tmp_path / 'more'}", cwd=tmp_path)
+    assert more.returncode == 0, more.stderr
+    longer = run_config(tmp_path / "more" / "run.mcap")["policy_overrides"]
+    assert "task.reward_progress=0.2" in longer and "task.reward_progress=0.1" not in longer
+    runs = load([tmp_path / "train", tmp_path / "ev", tmp_path / "more"]).runs
+    variants = dict(zip(runs["run_dir"].map(lambda d: Path(d).name), runs["variant"],
+                        strict=True))
+    assert variants["ev"] == variants["train"] != variants["more"]
+    assert "task.reward_progress=0.1" in variants["ev"]
+
+
 def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
     from inhand_exp.config import HandConfig, ObjectConfig
     from inhand_exp.control.hand import HandModel

@@ -60,7 +60,8 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
                               f"directory (hydra.run.dir, hydra.sweep.dir) or remove that one")
         print(f"{run_dir}: finished earlier ({done}); skipped")
         return run_dir / cfg.log.file
-    job = prepare(cfg, run_dir)  # every input read and checked: a refusal writes nothing
+    # every input read and checked: a refusal writes nothing
+    job = prepare(cfg, run_dir, overrides)
     log_path = run_dir / cfg.log.file
     if cfg.resume:
         log_path = fresh_log_path(run_dir, cfg.log.file)
@@ -74,7 +75,8 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
         print(f"{run_dir}: an earlier attempt did not finish; kept as {', '.join(kept)}")
     with RunLog(log_path, chunk_size=cfg.log.chunk_size_bytes,
                 flush_every_s=cfg.log.flush_every_s) as log:
-        log.write("/run/config", run_config_message(cfg, run_dir, overrides))
+        log.write("/run/config", run_config_message(
+            cfg, run_dir, overrides, job.learner.trained_with if job.learner else None))
         log.flush()
         summary = run_job(cfg, run_dir, log, job)
     done.write_text(json.dumps({"log": log_path.name, "overrides": list(overrides),

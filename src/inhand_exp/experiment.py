@@ -13,7 +13,7 @@ import importlib.resources
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,13 +69,15 @@ class Job:
     resumed: bool = False
 
 
-def prepare(cfg: DictConfig, run_dir: Path) -> Job:
+def prepare(cfg: DictConfig, run_dir: Path, overrides: Iterable[str] = ()) -> Job:
     """Build the learner and read every input (checkpoint, goal file): a bad one is refused
     here, with a ``ConfigError``, ``CheckpointError``, ``GoalsError`` or ``FileNotFoundError``,
     before the run writes anything.
 
     ``resume``: continue the training whose checkpoint is in ``run_dir`` up to ``train.frames``
-    in all; otherwise a ``checkpoint`` is a starting point for ``train.frames`` more.
+    in all; otherwise a ``checkpoint`` is a starting point for ``train.frames`` more. A run that
+    trains records its ``overrides`` (the command line's) in the policy it saves, after those of
+    the checkpoint it started from.
     """
     mode = str(getattr(cfg.mode, "value", cfg.mode))
     if cfg.goals.x0 is not None:  # a fixed start the hand cannot hold: refused before any run
@@ -97,10 +99,21 @@ def prepare(cfg: DictConfig, run_dir: Path) -> Job:
         target += learner.frames
     elif mode == "demo":
         learner.load(packaged_policy())
+    if mode in ("train", "train_eval"):
+        learner.trained_with = merged(learner.trained_with or [], overrides)
     goals = None
     if mode in ("eval", "train_eval") and cfg.eval.goals_file:
         goals = test_goals(cfg)
     return Job(mode, learner, target, goals, resumed=bool(cfg.resume))
+
+
+def merged(first: Iterable[str], then: Iterable[str]) -> list[str]:
+    """Overrides ``first`` followed by ``then``, one per key: a later value replaces an
+    earlier one in its place."""
+    out: dict[str, str] = {}
+    for o in (*first, *then):
+        out[o.split("=", 1)[0].lstrip("+~")] = o
+    return list(out.values())
 
 
 def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,
@@ -152,7 +165,9 @@ def _train_shared(cfg, learner: Learner, target: int, log: RunLog, say) -> None:
     with open(store.with_suffix(".lock"), "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
         if (store / CHECKPOINT).is_file():
+            mine = learner.trained_with
             learner.load(store / CHECKPOINT)
+            learner.trained_with = learner.trained_with or mine  # one written before they were
         if learner.frames >= target:
             say(f"reusing the policy in {store} ({learner.frames} frames)")
             return

@@ -38,8 +38,10 @@ def git_state(path: Path) -> dict[str, Any] | None:
         return None
 
 
-def run_config_message(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> dict[str, Any]:
-    """The ``/run/config`` message: everything needed to reproduce the run."""
+def run_config_message(cfg: DictConfig, run_dir: Path, overrides: list[str],
+                       policy_overrides: list[str] | None = None) -> dict[str, Any]:
+    """The ``/run/config`` message: everything needed to reproduce the run, and the overrides
+    of the training that made the policy it runs (``policy_overrides``, when known)."""
     message = {
         "config": OmegaConf.to_container(cfg, resolve=True, enum_to_str=True),
         "versions": package_versions(),
@@ -49,6 +51,8 @@ def run_config_message(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> 
         "run_dir": str(run_dir),
         "started_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }
+    if policy_overrides is not None:
+        message["policy_overrides"] = list(policy_overrides)
     git = git_state(Path(__file__).resolve().parent)
     if git is not None:  # omitted outside a checkout: the schema has no null types
         message["git"] = git

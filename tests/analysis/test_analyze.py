@@ -176,6 +176,24 @@ def test_variant_keeps_only_what_changes_the_policy():
         "goals.train_groups=[easy,hard] task.reward_progress=0.1")
 
 
+def test_an_older_eval_log_takes_its_variant_from_the_checkpoints_record(tmp_path, compose_cfg):
+    """A log written before ``/run/config`` had ``policy_overrides``, of an evaluation of a
+    packaged actor (no ``.hydra`` beside it), has the variant of the actor's training."""
+    import torch
+
+    from inhand_exp.experiment import PACKAGED, packaged_policy
+    from inhand_exp.learn.checkpoint import trained_with
+
+    path = tmp_path / "ev" / "run.mcap"
+    path.parent.mkdir()
+    own = ["mode=eval", f"checkpoint={packaged_policy()}", "+profile=full"]
+    with RunLog(path) as log:
+        log.write("/run/config", run_config_message(compose_cfg(*own), path.parent, own))
+    recorded = trained_with(torch.load(packaged_policy(), weights_only=True))
+    assert recorded, f"{PACKAGED} records no training overrides"
+    assert load([path]).runs["variant"].tolist() == [variant(recorded)] != [variant(own)]
+
+
 def test_rows_follow_the_papers_order():
     import pandas as pd
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 
 import pandas as pd
@@ -41,8 +42,11 @@ def variant(overrides: Iterable[str]) -> str:
 
 
 def _policy_overrides(cfg: dict) -> list[str]:
-    """The overrides of the run that trained the evaluated policy: its ``.hydra`` record beside
-    the checkpoint when there is one, else this run's own."""
+    """The overrides of the training that made the run's policy: as the run recorded them from
+    its checkpoint; for a log written before that record, the ``.hydra`` record beside the
+    checkpoint or the checkpoint's own record, when there is one; else the run's own."""
+    if "policy_overrides" in cfg:
+        return list(cfg["policy_overrides"])
     ckpt = cfg.get("config", {}).get("checkpoint")
     if ckpt:
         saved = Path(ckpt).parent / ".hydra" / "overrides.yaml"
@@ -50,7 +54,26 @@ def _policy_overrides(cfg: dict) -> list[str]:
             loaded = OmegaConf.load(saved)
             if isinstance(loaded, ListConfig):
                 return [str(o) for o in loaded]
+        recorded = _checkpoint_overrides(Path(ckpt))
+        if recorded is not None:
+            return recorded
     return list(cfg.get("overrides", []))
+
+
+@cache
+def _checkpoint_overrides(path: Path) -> list[str] | None:
+    """The training overrides a checkpoint file records (None: no such file, or none)."""
+    if not path.is_file():
+        return None
+    import torch  # only for logs older than their ``policy_overrides``
+
+    from inhand_exp.learn.checkpoint import trained_with
+
+    try:
+        state = torch.load(path, weights_only=True)
+    except Exception:  # noqa: BLE001 - not a checkpoint: the run's own overrides serve
+        return None
+    return trained_with(state) if isinstance(state, dict) else None
 
 
 @dataclass

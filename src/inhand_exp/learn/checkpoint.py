@@ -10,6 +10,7 @@ from pathlib import Path
 import torch
 
 REQUIRED = ("learner", "iteration", "frames")
+TRAINED_WITH = "trained_with"  # the overrides of the training run(s) that made the policy
 
 
 class CheckpointError(ValueError):
@@ -21,6 +22,19 @@ def save_checkpoint(state: dict, path: Path) -> None:
     tmp = path.with_suffix(path.suffix + ".tmp")
     torch.save(state, tmp)
     tmp.replace(path)
+
+
+def stamped(state: dict, overrides: list[str] | None) -> dict:
+    """``state`` with the overrides of the training that made it (none recorded: unchanged), so
+    that an evaluation of the file, wherever it is copied, knows the policy's recipe."""
+    return state if overrides is None else {**state, TRAINED_WITH: list(overrides)}
+
+
+def trained_with(state: dict) -> list[str] | None:
+    """The training overrides ``stamped`` recorded in ``state``; None for a checkpoint written
+    before they were recorded."""
+    saved = state.get(TRAINED_WITH)
+    return None if saved is None else [str(o) for o in saved]
 
 
 def read_checkpoint(path: Path, learner: str) -> dict:

@@ -37,7 +37,14 @@ from torchrl.objectives import DDPGLoss, SoftUpdate
 from inhand_exp.config import DDPGConfig, HandConfig, typed
 from inhand_exp.envs.specs import OBS_DIM
 from inhand_exp.envs.torque_env import TorqueEnv
-from inhand_exp.learn.checkpoint import CheckpointError, read_checkpoint, restore, save_checkpoint
+from inhand_exp.learn.checkpoint import (
+    CheckpointError,
+    read_checkpoint,
+    restore,
+    save_checkpoint,
+    stamped,
+    trained_with,
+)
 from inhand_exp.learn.registry import Progress
 
 KEEP = ("observation", "action", ("next", "observation"), ("next", "reward"),
@@ -117,6 +124,7 @@ class DDPG:
         self.buffer = TensorDictReplayBuffer(
             storage=LazyTensorStorage(params.buffer_size), batch_size=params.batch_size)
         self.iteration, self.frames = 0, 0
+        self.trained_with: list[str] | None = None
 
     @property
     def policy(self) -> TensorDictSequential:
@@ -198,7 +206,7 @@ class DDPG:
                 "learner": "ddpg", "torch_rng": torch.get_rng_state()}
 
     def save(self, path: Path) -> None:
-        save_checkpoint(self.state_dict(), path)
+        save_checkpoint(stamped(self.state_dict(), self.trained_with), path)
 
     def load(self, path: Path) -> None:
         state = read_checkpoint(path, "ddpg")
@@ -214,6 +222,7 @@ class DDPG:
 
         restore(path, load)
         self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
+        self.trained_with = trained_with(state)
 
 
 def _rates(batch) -> dict[str, float]:

@@ -25,7 +25,14 @@ from torchrl.objectives.value import GAE
 from inhand_exp.config import PPOConfig, typed
 from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.envs.specs import OBS_DIM
-from inhand_exp.learn.checkpoint import CheckpointError, read_checkpoint, restore, save_checkpoint
+from inhand_exp.learn.checkpoint import (
+    CheckpointError,
+    read_checkpoint,
+    restore,
+    save_checkpoint,
+    stamped,
+    trained_with,
+)
 from inhand_exp.learn.features import HandGeometry, ObservationFeatures
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import action_table
@@ -92,6 +99,7 @@ class PPO:
                                 critic_coeff=params.critic_coef, normalize_advantage=True)
         self.optim = torch.optim.Adam(self.loss.parameters(), lr=params.lr)
         self.iteration, self.frames = 0, 0
+        self.trained_with: list[str] | None = None
 
     @property
     def policy(self) -> ProbabilisticActor:
@@ -161,7 +169,7 @@ class PPO:
                 "torch_rng": torch.get_rng_state()}
 
     def save(self, path: Path) -> None:
-        save_checkpoint(self.state_dict(), path)
+        save_checkpoint(stamped(self.state_dict(), self.trained_with), path)
 
     def load(self, path: Path) -> None:
         """Resume from ``path`` (or, from a packaged policy that holds the actor alone, only
@@ -187,3 +195,4 @@ class PPO:
 
         restore(path, load)
         self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
+        self.trained_with = trained_with(state)

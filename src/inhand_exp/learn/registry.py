@@ -30,6 +30,9 @@ class Learner(Protocol):
     per_action_log: bool  # its evaluation logs each action (/episode/action): the mid level
     stochastic: bool  # its policy draws its actions under eval.sample (else it has one answer)
     env_class: type[EnvBase]  # what it acts in, batched by ``envs.batched.batched_env``
+    # the overrides of the training that made its policy, saved in and loaded from its
+    # checkpoint (None: a checkpoint written before they were recorded, or no training yet)
+    trained_with: list[str] | None
 
     def train(self, env: EnvBase, frames: int, progress: Progress | None = None,
               checkpoint: Path | None = None, checkpoint_every: int = 10) -> None:

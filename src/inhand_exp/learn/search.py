@@ -47,7 +47,7 @@ from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.primitive_env import PrimitiveEnv
-from inhand_exp.learn.checkpoint import read_checkpoint, save_checkpoint
+from inhand_exp.learn.checkpoint import read_checkpoint, save_checkpoint, stamped, trained_with
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import Action, action_table
 from inhand_exp.task.graph import SIDES, Lattice, PoseGraph, build_graph
@@ -124,6 +124,7 @@ class Search:
         self.cache = Path(self.params.cache_dir) / f"graph-{self.key}.npz"
         self.graph: PoseGraph | None = None
         self.iteration, self.frames = 0, 0
+        self.trained_with: list[str] | None = None
         self.stats: dict[str, float] = {}
 
     # --- the graph --------------------------------------------------------------------------
@@ -168,12 +169,14 @@ class Search:
             self.save(checkpoint)
 
     def save(self, path: Path) -> None:
-        save_checkpoint({"learner": "search", "iteration": self.iteration,
-                         "frames": self.frames, "graph_key": self.key}, path)
+        save_checkpoint(stamped({"learner": "search", "iteration": self.iteration,
+                                 "frames": self.frames, "graph_key": self.key},
+                                self.trained_with), path)
 
     def load(self, path: Path) -> None:
         state = read_checkpoint(path, "search")
         self.iteration, self.frames = int(state["iteration"]), int(state["frames"])
+        self.trained_with = trained_with(state)
 
 
 @dataclass

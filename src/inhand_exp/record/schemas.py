@@ -91,6 +91,13 @@ RUN_CONFIG = _topic(
             "description": "Hydra command-line overrides the run was started with.",
             "items": {"type": "string"},
         },
+        "policy_overrides": {
+            "type": "array",
+            "description": "Overrides of the training run(s) that made the policy this run "
+                           "trains or evaluates, as its checkpoint records them; absent when "
+                           "the checkpoint predates the record.",
+            "items": {"type": "string"},
+        },
         "run_dir": _string("Directory the run writes its outputs to."),
         "started_utc": {
             "type": "string",

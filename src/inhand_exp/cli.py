@@ -97,7 +97,7 @@ def first_success(log_path: Path) -> int | None:
     """The first successful hard episode of a demo log (None: the first with states)."""
     from inhand_exp.record import read_log
 
-    for m in read_log(log_path).topic("/eval/episode"):
+    for m in read_log(log_path, topics=("/eval/episode",)).topic("/eval/episode"):
         if m["group"] == "hard" and m["success"]:
             return m["episode"]
     return None

@@ -178,6 +178,17 @@ def test_topic_helper_filters_and_catches_typos(written: tuple[Path, Written]) -
         log.topic("/eval/episodes")
 
 
+def test_a_read_of_some_topics_gives_exactly_theirs(written: tuple[Path, Written]) -> None:
+    path, messages = written
+    some = ("/eval/episode", "/run/config")
+    log = read_log(path, topics=some)
+    assert [(m.topic, m.data) for m in log.messages] == [
+        (t, e) for t, _, e in messages if t in some]
+    assert log.topic("/eval/episode") == read_log(path).topic("/eval/episode")
+    with pytest.raises(KeyError, match="read it with topics including '/sim/state'"):
+        log.topic("/sim/state")  # left out by this read: not silently empty
+
+
 def test_empty_log_reads_back_complete(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
     RunLog(path).close()

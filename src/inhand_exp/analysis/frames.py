@@ -21,6 +21,7 @@ from omegaconf import ListConfig, OmegaConf
 
 from inhand_exp.record.reader import LogError, read_log
 
+TOPICS = ("/run/config", "/train/iteration", "/eval/episode")  # what the frames are made of
 LABELS = ("learner", "variant", "object", "perturb", "noise", "seed")
 # overrides that do not change what a policy is (what a run does, where it writes, how long)
 NOT_RECIPE = {"seed", "mode", "checkpoint", "goals", "resume", "learner", "object", "perturb",
@@ -116,7 +117,7 @@ def load(paths: Iterable[str | Path], warn: Callable[[str], None] = print) -> Fr
     logs = sorted(find_logs(paths), key=lambda p: (str(p.parent), p.stat().st_mtime, p.name))
     for path in logs:
         try:
-            log = read_log(path)
+            log = read_log(path, topics=TOPICS)
         except (LogError, OSError) as err:
             skipped.append((str(path), str(err)))
             warn(f"inhand-analyze: skipping {path}: not a run log ({err})")

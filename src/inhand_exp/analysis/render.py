@@ -45,7 +45,7 @@ def box(pose, length: float, width: float) -> np.ndarray:
 def episode_frames(path: Path, episode: int | None) -> tuple[dict, list[dict], dict | None]:
     """The run's config, the episode's ``/sim/state`` messages and its ``/eval/episode``."""
     try:
-        log = read_log(path)
+        log = read_log(path, topics=("/run/config", "/sim/state", "/eval/episode"))
     except LogError as err:
         raise RenderError(f"{path}: not a run log ({err})") from None
     configs = log.topic("/run/config")

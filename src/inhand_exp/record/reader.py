@@ -9,7 +9,7 @@ import os
 import struct
 import zlib
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -66,9 +66,14 @@ class Log:
     truncated: bool = False
     corrupt_chunks: int = 0
     problems: list[str] = field(default_factory=list)
+    topics: frozenset[str] | None = None  # the topics read (None: all of them)
 
     def topic(self, name: str) -> list[dict[str, Any]]:
-        """The data of every message on topic ``name``, in order (KeyError for a typo)."""
+        """The data of every message on topic ``name``, in order (KeyError for a typo, or for
+        a topic this read left out)."""
+        if self.topics is not None and name not in self.topics:
+            raise KeyError(f"{self.path} was read for topics {', '.join(sorted(self.topics))} "
+                           f"only; read it with topics including {name!r}")
         found = [m.data for m in self.messages if m.topic == name]
         if not found and name not in TOPIC_SCHEMAS:
             topics = sorted(set(TOPIC_SCHEMAS) | {m.topic for m in self.messages})
@@ -106,9 +111,12 @@ def _parse(reader: Callable[[ReadDataStream], McapRecord], body: bytes) -> McapR
 
 
 def read_log(
-    path: str | os.PathLike[str], *, record_size_limit: int = DEFAULT_RECORD_SIZE_LIMIT
+    path: str | os.PathLike[str], *, topics: Collection[str] | None = None,
+    record_size_limit: int = DEFAULT_RECORD_SIZE_LIMIT
 ) -> Log:
-    """Read every intact message of the run log at ``path``.
+    """Read every intact message of the run log at ``path`` (of ``topics`` only, when given:
+    the others are not decoded, which saves most of the time on an evaluation's log of
+    ``/sim/state``).
 
     A file without footer (writer killed) gives the messages of every chunk completed before
     the cut, ``truncated=True``. A chunk with damaged bytes is left out and counted; reading
@@ -122,17 +130,19 @@ def read_log(
             data = f.read()
     except FileNotFoundError:
         raise FileNotFoundError(errno.ENOENT, "no such run log", str(path)) from None
-    return _Reader(path, data, record_size_limit).read()
+    return _Reader(path, data, record_size_limit,
+                   None if topics is None else frozenset(topics)).read()
 
 
 class _Reader:
     """One pass over one file's bytes: data section in order, summary only as a fallback."""
 
-    def __init__(self, path: Path, buf: bytes, record_size_limit: int) -> None:
+    def __init__(self, path: Path, buf: bytes, record_size_limit: int,
+                 topics: frozenset[str] | None = None) -> None:
         self.path = path
         self.buf = buf
         self.limit = record_size_limit
-        self.log = Log(path)
+        self.log = Log(path, topics=topics)
         self.channels: dict[int, Channel] = {}
         self.raw: list[Message] = []
         self.good_chunks: dict[int, int] = {}  # offset -> body bytes used, chunks kept
@@ -409,11 +419,13 @@ class _Reader:
     def decode(self) -> None:
         """Turn the kept raw messages into LogMessages; count what cannot be decoded."""
         dropped: Counter[str] = Counter()
-        messages = self.log.messages
+        messages, wanted = self.log.messages, self.log.topics
         for raw in self.raw:
             channel = self.channels.get(raw.channel_id)
             if channel is None:
                 dropped[f"channel id {raw.channel_id} has no channel record"] += 1
+                continue
+            if wanted is not None and channel.topic not in wanted:
                 continue
             if channel.message_encoding != MessageEncoding.JSON:
                 dropped[f"{channel.topic}: message encoding {channel.message_encoding!r}"] += 1

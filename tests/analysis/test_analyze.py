@@ -144,6 +144,19 @@ def test_robustness_rows_give_the_change_from_the_trained_object():
     assert alone["vs_trained"].isna().all() and "| - |" in tables.render(alone, "robustness")
 
 
+def test_a_cell_missing_a_seed_is_compared_with_the_same_seeds_of_the_trained_object():
+    """Midway through a sweep the trained object has seeds 0 and 1 and the thinner pole only
+    seed 0: its change is seed 0's, not seed 0's success minus the two seeds' mean."""
+    rows = [episode(k, "medium", k < wins, seed=seed) | {"variant": "default"}
+            for seed, wins in ((0, 8), (1, 4)) for k in range(10)]
+    thin = [episode(k, "medium", k < 7, seed=0) | {"perturb": "thinner", "variant": "default"}
+            for k in range(10)]
+    out = tables.build(pd.DataFrame(rows + thin), "robustness").set_index("perturb")
+    assert out.loc["none", "success_rate_mean"] == pytest.approx(0.6)
+    assert out.loc["thinner", "vs_trained"] == pytest.approx(-0.1)  # 0.7 - 0.8, not 0.7 - 0.6
+    assert out.loc["none", "vs_trained"] == 0.0
+
+
 def test_the_paired_error_leaves_out_pairs_drawn_again_for_the_perturbation():
     """A pair the perturbed pole was given again (another X0) is not compared with the
     trained object's; the rest are, episode by episode."""

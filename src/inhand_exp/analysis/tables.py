@@ -99,18 +99,25 @@ SAME = ["learner", "variant", "noise"]  # what a Table III row is compared withi
 
 def _vs_trained(rows: pd.DataFrame, episodes: pd.DataFrame) -> pd.DataFrame:
     """Each row's success minus that of the trained object (``perturb=none``) of the same
-    learner, variant and noise, ours and the paper's (Table III's comparison; NaN where the
-    trained object was not evaluated), with the standard error of ours over the pairs both
-    evaluated (``paired_se``)."""
-    base = rows[rows["perturb"] == "none"].set_index(SAME)
-    idx = pd.MultiIndex.from_frame(rows[SAME])
-    rows = rows.copy()
-    for col, name in (("success_rate_mean", "vs_trained"), ("paper_success", "paper_vs_trained")):
-        ref = base[col].reindex(idx).to_numpy(dtype=float)
-        rows[name] = rows[col].to_numpy(dtype=float) - ref
-    se = paired_se(episodes)
+    learner, variant and noise: ours seed by seed, over the seeds both evaluated, then averaged
+    (so a cell that a sweep has not run for every seed yet is compared with the same seeds of
+    the trained object), and the paper's; NaN where the trained object was not evaluated. With
+    the standard error of ours over the pairs both evaluated (``paired_se``)."""
     keys = [*SAME, "perturb"]
-    rows["vs_trained_se"] = se.reindex(pd.MultiIndex.from_frame(rows[keys])).to_numpy(float)
+    per = episodes.groupby([*keys, "seed"], dropna=False)["success"].mean().rename("rate")
+    per = per.reset_index()
+    base = per[per["perturb"] == "none"].drop(columns="perturb")
+    both = per.merge(base, on=[*SAME, "seed"], suffixes=("", "_trained"))
+    ours = (both["rate"] - both["rate_trained"]).groupby(
+        [both[k] for k in keys], dropna=False).mean()
+    rows = rows.copy()
+    idx = pd.MultiIndex.from_frame(rows[keys])
+    rows["vs_trained"] = ours.reindex(idx).to_numpy(dtype=float)
+    ref = rows[rows["perturb"] == "none"].set_index(SAME)["paper_success"]
+    rows["paper_vs_trained"] = rows["paper_success"].to_numpy(dtype=float) - ref.reindex(
+        pd.MultiIndex.from_frame(rows[SAME])).to_numpy(dtype=float)
+    se = paired_se(episodes)
+    rows["vs_trained_se"] = se.reindex(idx).to_numpy(float)
     return rows
 
 

@@ -166,7 +166,7 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
 
 def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path):
     from inhand_exp.analysis.frames import load
-    from inhand_exp.experiment import merged
+    from inhand_exp.runinfo import merged
 
     train = inhand_exp("mode=train", "task.reward_progress=0.1",
                        f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)

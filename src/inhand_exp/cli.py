@@ -20,9 +20,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError, register_configs, validate
 from inhand_exp.learn.checkpoint import CheckpointError
+from inhand_exp.runinfo import CONF_DIR
 from inhand_exp.task.goals import GoalsError
-
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 
 register_configs()
 

@@ -30,6 +30,7 @@ from inhand_exp.learn.registry import Learner, make_learner
 from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
 from inhand_exp.record.scene import SceneGeometry, SceneReplay
+from inhand_exp.runinfo import merged
 from inhand_exp.task.actions import action_table
 from inhand_exp.task.goals import (
     GoalPair,
@@ -105,15 +106,6 @@ def prepare(cfg: DictConfig, run_dir: Path, overrides: Iterable[str] = ()) -> Jo
     if mode in ("eval", "train_eval") and cfg.eval.goals_file:
         goals = test_goals(cfg)
     return Job(mode, learner, target, goals, resumed=bool(cfg.resume))
-
-
-def merged(first: Iterable[str], then: Iterable[str]) -> list[str]:
-    """Overrides ``first`` followed by ``then``, one per key: a later value replaces an
-    earlier one in its place."""
-    out: dict[str, str] = {}
-    for o in (*first, *then):
-        out[o.split("=", 1)[0].lstrip("+~")] = o
-    return list(out.values())
 
 
 def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,

@@ -6,11 +6,13 @@ import datetime as dt
 import importlib.metadata
 import platform
 import subprocess
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+CONF_DIR = Path(__file__).resolve().parents[2] / "conf"  # the app's config tree
 PACKAGES = ("inhand-exp", "torch", "torchrl", "tensordict", "pybullet", "hydra-core",
             "omegaconf", "mcap", "numpy", "scipy", "pandas")
 
@@ -57,3 +59,12 @@ def run_config_message(cfg: DictConfig, run_dir: Path, overrides: list[str],
     if git is not None:  # omitted outside a checkout: the schema has no null types
         message["git"] = git
     return message
+
+
+def merged(first: Iterable[str], then: Iterable[str]) -> list[str]:
+    """Overrides ``first`` followed by ``then``, one per key: a later value replaces an
+    earlier one in its place."""
+    out: dict[str, str] = {}
+    for o in (*first, *then):
+        out[o.split("=", 1)[0].lstrip("+~")] = o
+    return list(out.values())

@@ -189,6 +189,16 @@ def test_variant_keeps_only_what_changes_the_policy():
         "goals.train_groups=[easy,hard] task.reward_progress=0.1")
 
 
+def test_a_recipe_choice_and_its_values_given_one_by_one_are_one_variant():
+    recipe = variant(["+recipe=ppo", "+profile=full", "seed=2", "goals=hard"])
+    assert recipe == variant(["mode=train", "train.frames=163840", "task.reward_progress=0.1",
+                              "goals.train_groups=[easy,medium,hard]"])
+    assert "task.reward_progress=0.1" in recipe
+    changed = variant(["+recipe=ppo", "task.reward_progress=0.2"])  # a later value wins
+    assert "task.reward_progress=0.2" in changed and "0.1" not in changed
+    assert variant(["+recipe=nosuch"]) == "+recipe=nosuch"  # no file: kept as written
+
+
 def test_an_older_eval_log_takes_its_variant_from_the_checkpoints_record(tmp_path, compose_cfg):
     """A log written before ``/run/config`` had ``policy_overrides``, of an evaluation of a
     packaged actor (no ``.hydra`` beside it), has the variant of the actor's training."""

@@ -20,6 +20,7 @@ import pandas as pd
 from omegaconf import ListConfig, OmegaConf
 
 from inhand_exp.record.reader import LogError, read_log
+from inhand_exp.runinfo import CONF_DIR, merged
 
 TOPICS = ("/run/config", "/train/iteration", "/eval/episode")  # what the frames are made of
 LABELS = ("learner", "variant", "object", "perturb", "noise", "seed")
@@ -32,14 +33,50 @@ NOT_RECIPE_PREFIXES = ("hydra", "+hydra", "log.", "eval.")
 
 def variant(overrides: Iterable[str]) -> str:
     """The recipe of a run, from its overrides: every override that changes the policy (the
-    reward, the observation, the training goals...), sorted; "default" when there is none."""
+    reward, the observation, the training goals...), sorted; "default" when there is none.
+    A ``+recipe=`` or ``+profile=`` choice counts as the values its file sets, so a sweep's
+    ``+recipe=ppo`` and the same values given one by one are one recipe; a later override of
+    a key replaces the earlier value."""
     keep = []
-    for o in overrides:
+    for o in merged([], _expanded(overrides)):
         key = o.split("=", 1)[0].lstrip("+~")
         if key in NOT_RECIPE or key.startswith(NOT_RECIPE_PREFIXES):
             continue
         keep.append(o)
     return " ".join(sorted(keep)) or "default"
+
+
+GLOBAL_GROUPS = ("recipe", "profile")  # conf/ groups whose options set keys across the config
+
+
+def _expanded(overrides: Iterable[str]) -> list[str]:
+    """``overrides`` with each ``+recipe=X`` / ``+profile=X`` replaced by the ``key=value``
+    overrides its file in ``conf/`` sets (its ``defaults`` choices and ``hydra`` keys left
+    out); an option without a file stays as it is."""
+    out: list[str] = []
+    for o in overrides:
+        key, _, value = o.partition("=")
+        path = CONF_DIR / key.lstrip("+~") / f"{value}.yaml"
+        if key.lstrip("+~") not in GLOBAL_GROUPS or not path.is_file():
+            out.append(o)
+            continue
+        settings = OmegaConf.to_container(OmegaConf.load(path))
+        out += _as_overrides({k: v for k, v in settings.items()
+                              if k not in ("defaults", "hydra")})
+    return out
+
+
+def _as_overrides(tree: dict, prefix: str = "") -> list[str]:
+    """``{"a": {"b": [1, 2]}}`` -> ``["a.b=[1,2]"]``, as they are written on a command line."""
+    out = []
+    for k, v in tree.items():
+        if isinstance(v, dict):
+            out += _as_overrides(v, f"{prefix}{k}.")
+        elif isinstance(v, list):
+            out.append(f"{prefix}{k}=[{','.join(map(str, v))}]")
+        else:
+            out.append(f"{prefix}{k}={v}")
+    return out
 
 
 def _policy_overrides(cfg: dict) -> list[str]:

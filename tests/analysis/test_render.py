@@ -40,6 +40,43 @@ def test_an_episode_becomes_a_gif_whose_frames_differ_and_png_stills(eval_log, t
     assert len(list(tmp_path.glob("ep-t*.png"))) == 3
 
 
+def test_a_long_episode_becomes_a_time_lapse_of_at_most_max_frames(eval_log, tmp_path):
+    full = render(eval_log, episode=1, out=tmp_path / "full.gif", max_frames=0)
+    with Image.open(full) as gif:
+        assert gif.n_frames > 8
+    short = render(eval_log, episode=1, out=tmp_path / "short.gif", max_frames=6)
+    with Image.open(short) as gif:
+        assert gif.n_frames == 6
+        first = np.asarray(gif.convert("RGB")).copy()
+        gif.seek(5)
+        last = np.asarray(gif.convert("RGB"))
+    assert (first != last).any()  # still the episode's motion, from its first state to its last
+
+
+def test_a_demo_logs_replay_takes_the_result_of_the_group_whose_states_it_holds(tmp_path,
+                                                                               compose_cfg):
+    """A demo log has episode 0 of every group, and states of its last group (hard) only: the
+    goal and outcome drawn are the hard episode's, not the easy one's."""
+    from inhand_exp.analysis.render import episode_frames
+    from inhand_exp.runinfo import run_config_message
+
+    path = tmp_path / "run.mcap"
+    with RunLog(path) as log:
+        log.write("/run/config", run_config_message(compose_cfg(), tmp_path, []))
+        for group, win in (("easy", True), ("hard", False)):
+            log.write("/eval/episode", {
+                "episode": 0, "group": group, "success": win, "dropped": False,
+                "timeout": not win, "sim_time_s": 1.0, "n_actions": 1, "n_invalid": 0,
+                "x0": [0.0, 0.3, 0.0], "xg": [0.01 if win else -0.02, 0.3, 0.0],
+                "final_pose": [0.0, 0.3, 0.0]})
+        for t in (0.0, 0.5):
+            log.write("/sim/state", {"episode": 0, "sim_time_s": t,
+                                     "object_pose": [0.0, 0.3, 0.0], "joint_q": [0.0] * 6,
+                                     "joint_qd": [0.0] * 6, "contacts": []})
+    _, frames, result = episode_frames(path, 0)
+    assert len(frames) == 2 and result["group"] == "hard" and result["xg"][0] == -0.02
+
+
 def test_refusals_name_the_problem(eval_log, tmp_path, capsys):
     with pytest.raises(RenderError, match="no states of episode 7; episodes with states: 0..1"):
         render(eval_log, episode=7, out=tmp_path / "x.gif")

@@ -61,15 +61,26 @@ def episode_frames(path: Path, episode: int | None) -> tuple[dict, list[dict], d
         raise RenderError(f"{path}: no states of episode {ep}; episodes with states: "
                           f"{have[0]}..{have[-1]} ({len(have)})")
     frames = sorted((m for m in states if m["episode"] == ep), key=lambda m: m["sim_time_s"])
-    result = next((m for m in log.topic("/eval/episode") if m["episode"] == ep), None)
+    # the last result of that number: a demo log holds every group's episodes 0..N-1 but the
+    # states of its last group only
+    result = next((m for m in reversed(log.topic("/eval/episode")) if m["episode"] == ep), None)
     return configs[0]["config"], frames, result
 
 
+MAX_FRAMES = 300  # a replay longer than this many states plays as a time-lapse
+
+
 def render(path: Path, episode: int | None = None, out: Path | None = None,
-           fps: float = 20.0, snapshots: int = 0) -> Path:
+           fps: float = 20.0, snapshots: int = 0, max_frames: int = MAX_FRAMES) -> Path:
     """Write the episode's replay to ``out`` (default: ``episode-N.gif`` beside the log), and
-    ``snapshots`` PNG stills evenly spaced over it (``<out>-t<time>s.png``)."""
+    ``snapshots`` PNG stills evenly spaced over it (``<out>-t<time>s.png``). An episode of more
+    than ``max_frames`` logged states (0: no limit) is drawn from that many, evenly spaced, the
+    first and the last among them: a long episode is a time-lapse, not a minutes-long GIF."""
     cfg, frames, result = episode_frames(path, episode)
+    lapse = 1.0
+    if 0 < max_frames < len(frames):
+        lapse = (len(frames) - 1) / (max_frames - 1) if max_frames > 1 else float(len(frames))
+        frames = [frames[int(k)] for k in np.linspace(0, len(frames) - 1, max_frames).round()]
     ep = frames[0]["episode"]
     out = out or path.parent / f"episode-{ep}.gif"
     suffix = out.suffix.lower()
@@ -121,6 +132,8 @@ def render(path: Path, episode: int | None = None, out: Path | None = None,
         forces.set_offsets(xy)
         forces.set_UVC(uv[:, 0], uv[:, 1])
         text = f"episode {ep}   t = {m['sim_time_s']:.2f} s   theta = {math.degrees(th):.0f} deg"
+        if lapse > 1:
+            text += f"   (x{lapse:.1f})"
         if result is not None and k == len(frames) - 1:
             outcome = "success" if result["success"] else (
                 "dropped" if result["dropped"] else "timeout")
@@ -147,16 +160,20 @@ def main(argv: list[str] | None = None) -> None:
                         help="episode number (default: the first with states)")
     parser.add_argument("-o", "--output", type=Path, default=None, help="FILE.gif or FILE.mp4")
     parser.add_argument("--fps", type=float, default=20.0)
+    parser.add_argument("--max-frames", type=int, default=MAX_FRAMES,
+                        help="draw a longer episode from this many states, evenly spaced (a "
+                             "time-lapse); 0: every logged state")
     parser.add_argument("--snapshots", type=int, default=0,
                         help="also write this many PNG stills, evenly spaced")
     args = parser.parse_args(argv)
-    if args.snapshots < 0 or not args.fps > 0:
-        parser.error("--snapshots must be >= 0 and --fps > 0")
+    if args.snapshots < 0 or not args.fps > 0 or args.max_frames < 0 or args.max_frames == 1:
+        parser.error("--snapshots must be >= 0, --fps > 0 and --max-frames 0 or >= 2")
     if not args.log.is_file():
         print(f"inhand-render: {args.log}: no such file", file=sys.stderr)
         raise SystemExit(2)
     try:
-        out = render(args.log, args.episode, args.output, args.fps, args.snapshots)
+        out = render(args.log, args.episode, args.output, args.fps, args.snapshots,
+                     args.max_frames)
     except RenderError as err:
         print(f"inhand-render: {err}", file=sys.stderr)
         raise SystemExit(2) from None

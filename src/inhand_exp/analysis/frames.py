@@ -56,8 +56,9 @@ def _expanded(overrides: Iterable[str]) -> list[str]:
     out: list[str] = []
     for o in overrides:
         key, _, value = o.partition("=")
-        path = CONF_DIR / key.lstrip("+~") / f"{value}.yaml"
-        if key.lstrip("+~") not in GLOBAL_GROUPS or not path.is_file():
+        group = key.lstrip("+~")
+        path = CONF_DIR / group / f"{value}.yaml"
+        if group not in GLOBAL_GROUPS or not path.is_file():
             out.append(o)
             continue
         settings = OmegaConf.to_container(OmegaConf.load(path))

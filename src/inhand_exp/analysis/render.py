@@ -79,7 +79,7 @@ def render(path: Path, episode: int | None = None, out: Path | None = None,
     cfg, frames, result = episode_frames(path, episode)
     lapse = 1.0
     if 0 < max_frames < len(frames):
-        lapse = (len(frames) - 1) / (max_frames - 1) if max_frames > 1 else float(len(frames))
+        lapse = (len(frames) - 1) / max(max_frames - 1, 1)
         frames = [frames[int(k)] for k in np.linspace(0, len(frames) - 1, max_frames).round()]
     ep = frames[0]["episode"]
     out = out or path.parent / f"episode-{ep}.gif"

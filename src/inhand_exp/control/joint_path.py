@@ -57,6 +57,7 @@ class FreeSpace:
         self._c, self._s = math.cos(pose[2]), math.sin(pose[2])
         self._graph = None
         self._ways: dict[tuple[int, int], np.ndarray] = {}  # start cell -> predecessors
+        self._nearest: dict[bytes, tuple[int, int] | None] = {}  # joint angles -> free cell
 
     @functools.cached_property
     def grid(self) -> np.ndarray:
@@ -112,7 +113,14 @@ class FreeSpace:
         return bool(0 <= i < self.n and 0 <= j < self.n and self.grid[i, j])
 
     def nearest_free(self, q: np.ndarray) -> tuple[int, int] | None:
-        """The free cell nearest ``q`` from which the straight move to ``q`` is clear."""
+        """The free cell nearest ``q`` from which the straight move to ``q`` is clear (found
+        once per ``q``: a flip searches from one start to several goals)."""
+        key = np.asarray(q, float).tobytes()
+        if key not in self._nearest:
+            self._nearest[key] = self._nearest_free(q)
+        return self._nearest[key]
+
+    def _nearest_free(self, q: np.ndarray) -> tuple[int, int] | None:
         base = np.round((q - self.lo) / self.step).astype(int)
         ring = [(0, 0)] + [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)]
         for da, db in sorted(ring, key=lambda d: abs(d[0]) + abs(d[1])):

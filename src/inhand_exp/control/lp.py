@@ -105,6 +105,7 @@ class VertexLP:
     MAX_DIM = 3
     _COMBOS: dict[tuple[int, int], np.ndarray] = {}
     _BOUNDS: dict[tuple[int, bytes, bytes], np.ndarray] = {}  # the bounds' rows of C, by pattern
+    _PAIRS: dict[tuple[int, int], tuple] = {}  # pairs of rows and where each choice finds them
 
     def __init__(self, c: np.ndarray, A_eq: np.ndarray, A_ub: np.ndarray | None,
                  b_ub: np.ndarray | None, lower: np.ndarray, upper: np.ndarray):
@@ -142,9 +143,8 @@ class VertexLP:
             det = X[:, 0, 0] * X[:, 1, 1] - X[:, 0, 1] * X[:, 1, 0]
             cof = X[:, ::-1, ::-1] * _SIGNS2
         else:
-            r0, r1, r2 = (np.ascontiguousarray(X[:, t]) for t in range(3))
-            cof = np.stack([_cross(r1, r2), _cross(r2, r0), _cross(r0, r1)], axis=1)
-            det = np.einsum("ij,ij->i", r0, cof[:, 0])
+            cof = self._cofactors3(self.CN, combos)
+            det = np.einsum("ij,ij->i", np.ascontiguousarray(X[:, 0]), cof[:, 0])
         S = np.abs(X).sum(axis=2)  # (k, d): each row's 1-norm
         scale = S[:, 0]
         for t in range(1, d):
@@ -165,6 +165,28 @@ class VertexLP:
             rows = cls._BOUNDS[key] = np.vstack([-eye[lo], eye[hi]])
             rows.flags.writeable = False
         return rows
+
+    @classmethod
+    def _cofactors3(cls, rows: np.ndarray, combos: np.ndarray) -> np.ndarray:
+        """``[r1 x r2, r2 x r0, r0 x r1]`` (k, 3, 3) for each choice ``(r0, r1, r2)`` of
+        ``rows``: the cross product of each pair of rows is computed once and shared by the
+        choices holding it (a reversed pair is the same product negated, exactly)."""
+        p = len(rows)
+        key = (p, len(combos))
+        index = cls._PAIRS.get(key)
+        if index is None:
+            a, b = np.triu_indices(p, 1)
+            slot = np.zeros((p, p), dtype=np.intp)
+            slot[a, b] = np.arange(len(a))
+            c0, c1, c2 = combos.T  # increasing within a choice
+            # the products r1 x r2 and r0 x r1 are pairs in order; r2 x r0 is -(r0 x r2)
+            index = cls._PAIRS[key] = (a, b, np.stack([slot[c1, c2], slot[c0, c2],
+                                                       slot[c0, c1]], axis=1))
+        a, b, pick = index
+        pairs = _cross(rows[a], rows[b])
+        cof = pairs[pick]
+        cof[:, 1] *= -1.0
+        return cof
 
     @classmethod
     def fits(cls, A_eq: np.ndarray) -> bool:

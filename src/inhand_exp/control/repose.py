@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,23 +52,18 @@ class GraspPlan:
 
     @classmethod
     def from_state(cls, model: HandModel, contacts, pose: np.ndarray, q: np.ndarray,
-                   gains: PrimitivesConfig, sliding: int | None = None, drag: float = 0.0
-                   ) -> GraspPlan:
+                   gains: PrimitivesConfig, sliding: int | None = None, drag: float = 0.0,
+                   geometry: tuple | None = None) -> GraspPlan:
         """Plan for ``contacts`` (which fingers and faces) at the fingertips' measured places.
 
         Each active tip is projected onto its face: the contact coordinate comes from the
         joints (measured) and the object pose (observed), not from a commanded target. The
         ``sliding`` finger gets a normal force plus ``drag`` times it along the contact
-        tangent (kinetic friction; zero for a frictionless push).
+        tangent (kinetic friction; zero for a frictionless push). ``geometry``: what
+        ``measured_geometry`` gives for these arguments, when the caller has it already.
         """
-        R = rotation(pose[2])
-        tips_W = model.tips(q)
-        _, nrm_W = contact_frames(model.shape, contacts, pose)
-        fingers = tuple(i for i in range(3) if contacts.active[i])
-        tips_O = np.array([R.T @ (tips_W[i] - pose[:2]) for i in fingers])
-        normals_O = np.array([R.T @ nrm_W[i] for i in fingers])
-        levers_O = tips_O + model.tip_radius * normals_O
-        return cls._planned(model, fingers, levers_O, normals_O, tips_O, gains, sliding, drag)
+        geometry = geometry or measured_geometry(model, contacts, pose, q)
+        return cls._planned(model, *geometry, gains, sliding, drag)
 
     @classmethod
     def from_contacts(cls, model: HandModel, contacts, gains: PrimitivesConfig,
@@ -78,22 +74,36 @@ class GraspPlan:
         fingers = tuple(i for i in range(3) if contacts.active[i])
         levers_O, normals_O = pts_O[list(fingers)], nrm_O[list(fingers)]
         return cls._planned(model, fingers, levers_O, normals_O,
-                            levers_O - model.tip_radius * normals_O, gains, sliding, drag)
+                            levers_O - model.tip_radius * normals_O,
+                            grasp_matrix(levers_O, normals_O), gains, sliding, drag)
 
     @classmethod
     def _planned(cls, model: HandModel, fingers: tuple[int, ...], levers_O: np.ndarray,
-                 normals_O: np.ndarray, tips_O: np.ndarray, gains: PrimitivesConfig,
-                 sliding: int | None, drag: float) -> GraspPlan:
-        G = grasp_matrix(levers_O, normals_O)
+                 normals_O: np.ndarray, tips_O: np.ndarray, G: np.ndarray,
+                 gains: PrimitivesConfig, sliding: int | None, drag: float) -> GraspPlan:
         coupled = {k: drag for k, i in enumerate(fingers) if i == sliding}
         sq = Squeeze.build(G, model.mu * gains.friction_margin, gains.min_normal_force_n,
                            gains.max_normal_force_n, coupled, light=tuple(coupled))
         return cls(fingers, levers_O, normals_O, tips_O, sq)
 
 
+def measured_geometry(model: HandModel, contacts, pose: np.ndarray, q: np.ndarray) -> tuple:
+    """``(fingers, levers_O, normals_O, tips_O, G)`` of ``contacts`` at the measured tips (see
+    ``GraspPlan.from_state``): what the plans of one state share, whichever finger slides."""
+    R = rotation(pose[2])
+    tips_W = model.tips(q)
+    _, nrm_W = contact_frames(model.shape, contacts, pose)
+    fingers = tuple(i for i in range(3) if contacts.active[i])
+    tips_O = np.array([R.T @ (tips_W[i] - pose[:2]) for i in fingers])
+    normals_O = np.array([R.T @ nrm_W[i] for i in fingers])
+    levers_O = tips_O + model.tip_radius * normals_O
+    return fingers, levers_O, normals_O, tips_O, grasp_matrix(levers_O, normals_O)
+
+
 def plan_for(model: HandModel, contacts, obs, gains: PrimitivesConfig, sliding: int | None = None,
              drag: float = 0.0) -> GraspPlan:
-    """``GraspPlan.from_state`` on ``obs``, built once per observation when it carries a cache.
+    """``GraspPlan.from_state`` on ``obs``, built once per observation when it carries a cache
+    (and the geometry shared by the plans of the same contacts, whichever finger slides).
 
     Plans are immutable apart from the warm start of their per-step LP, which changes how fast
     a solve is, not its answer.
@@ -103,7 +113,12 @@ def plan_for(model: HandModel, contacts, obs, gains: PrimitivesConfig, sliding: 
     key = (id(model), contacts, id(gains), sliding, drag)
     plan = obs.plans.get(key)
     if plan is None:
-        plan = GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains, sliding, drag)
+        where = ("geometry", id(model), contacts)
+        geometry = obs.plans.get(where)
+        if geometry is None:
+            geometry = obs.plans[where] = measured_geometry(model, contacts, obs.pose, obs.q)
+        plan = GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains, sliding, drag,
+                                    geometry)
         obs.plans[key] = plan
     return plan
 
@@ -164,12 +179,25 @@ def min_jerk(start: np.ndarray, goal: np.ndarray, duration: float, t: float
     if t >= duration:
         z = np.zeros_like(start)
         return goal.copy(), z, z
-    s = t / duration
+    p, v, a = _min_jerk_shape(t / duration)
     d = goal - start
-    p = start + d * (10 * s**3 - 15 * s**4 + 6 * s**5)
-    v = d * (30 * s**2 - 60 * s**3 + 30 * s**4) / duration
-    a = d * (60 * s - 180 * s**2 + 120 * s**3) / duration**2
-    return p, v, a
+    return start + d * p, d * v / duration, d * a / duration**2
+
+
+def min_jerk_1d(start: float, goal: float, duration: float, t: float
+                ) -> tuple[float, float, float]:
+    """``min_jerk`` of one coordinate, in plain floats."""
+    if t >= duration:
+        return goal, 0.0, 0.0
+    p, v, a = _min_jerk_shape(t / duration)
+    d = goal - start
+    return start + d * p, d * v / duration, d * a / duration**2
+
+
+def _min_jerk_shape(s: float) -> tuple[float, float, float]:
+    """The minimum-jerk polynomial and its first two derivatives at phase ``s`` in [0, 1)."""
+    return (10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4,
+            60 * s - 180 * s**2 + 120 * s**3)
 
 
 def object_wrench(model: HandModel, gains: PrimitivesConfig, pose: np.ndarray, twist: np.ndarray,
@@ -265,6 +293,18 @@ def repose_torques(model: HandModel, plan: GraspPlan, gains: PrimitivesConfig, q
     lam = plan.squeeze.solve(w_O)
     if lam is None:
         return None
+    return grasp_torques(model, plan, lam, acc, pose, twist, q, qd)
+
+
+def grasp_torques(model: HandModel, plan: GraspPlan, lam: np.ndarray, acc: np.ndarray,
+                  pose: np.ndarray, twist: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                  own: tuple[int, Callable[[FingerTerms, float, float], tuple[float, float]]]
+                  | None = None) -> np.ndarray:
+    """Joint torques (6,) of the fingers in ``plan``, in plain floats (the hot path): each
+    pushes with its contact force ``lam`` while its tip moves like the object point it touches
+    at the object's acceleration ``acc`` (world). The finger ``own[0]`` moves its tip by its
+    own law instead: ``own[1](terms, cos theta, sin theta)`` gives its tip acceleration
+    (world). Fingers outside the plan get zero torque."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     ax0, az0, alpha = float(acc[0]), float(acc[1]), float(acc[2])
     w2 = float(twist[2]) ** 2
@@ -277,9 +317,14 @@ def repose_torques(model: HandModel, plan: GraspPlan, gains: PrimitivesConfig, q
         fn, ft = lam[2 * k], lam[2 * k + 1]
         fx, fz = fn * nx - ft * nz, fn * nz + ft * nx  # f_n n + f_t rot90(n)
         t = model.fingers[i].terms(q[2 * i], q[2 * i + 1], qd[2 * i], qd[2 * i + 1])
-        qdd1, qdd2 = damped_qdd(t, ax0 - alpha * rz - w2 * rx, az0 + alpha * rx - w2 * rz)
+        if own is not None and own[0] == i:
+            ax, az = own[1](t, c, s)
+        else:
+            ax, az = ax0 - alpha * rz - w2 * rx, az0 + alpha * rx - w2 * rz
+        qdd1, qdd2 = damped_qdd(t, ax, az)
         tau[2 * i], tau[2 * i + 1] = pushing_torque(t, qdd1, qdd2, fx, fz, r * nx, r * nz)
     return tau
+
 
 class Repose:
     """Primitive: move the object by ``delta`` (dx, dz, dtheta) keeping every contact.

@@ -11,23 +11,22 @@ start pose exactly as in a hold.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 
 from inhand_exp.config import PrimitivesConfig
+from inhand_exp.control.finger import FingerTerms
 from inhand_exp.control.grasp import Contacts, face_axes, face_shifted, rotation
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
     GraspPlan,
     at_rest,
-    contact_force,
-    damped_qdd,
-    follow_qdd,
-    min_jerk,
+    grasp_torques,
+    min_jerk_1d,
     object_wrench,
     plan_for,
-    push_torque,
     strict_hold,
 )
 
@@ -85,6 +84,9 @@ class Slide:
             return f"finger {i} is not in contact"
         face = c.posture.faces[i]
         self.n_O, self.along_O = face_axes(face)
+        self._face = (tuple(map(float, -self.n_O)), tuple(map(float, self.n_O)),
+                      tuple(map(float, self.along_O)), model.shape.depth(face),
+                      model.tip_radius)  # outward, inward, along, depth, tip radius
         # the geometric checks first: they cost microseconds, the force plans milliseconds
         R = rotation(obs.pose[2])
         # where the face really is: the tip touches it, so its gap to the nominal face is the
@@ -163,52 +165,46 @@ class Slide:
         return getattr(self, name)
 
     def torques(self, obs) -> np.ndarray | None:
-        model, i = self.model, self.finger
         self._mark_stale(obs)
         plan = self._planned("plan" if obs.t < self.move_s else "rest", obs)
         zero = np.zeros(3)
-        acc, w_O = object_wrench(model, self.gains, obs.pose, obs.twist, (self.origin, zero, zero))
+        acc, w_O = object_wrench(self.model, self.gains, obs.pose, obs.twist,
+                                 (self.origin, zero, zero))
         lam = plan.squeeze.solve(w_O)
-        sliding = True
+        own = (self.finger, functools.partial(self._tip_acc, obs, acc))
         if lam is None:
             # the drag cannot be balanced this step: every finger holds, the sliding one with
             # static friction too, and the slide goes on at the next step
-            plan, sliding = self._planned("hold", obs), False
+            plan, own = self._planned("hold", obs), None
             lam = plan.squeeze.solve(w_O)
         if lam is None:
             return None
-        R = rotation(obs.pose[2])
-        tau = np.zeros(6)
-        for k, j in enumerate(plan.fingers):
-            f_W, n_W = contact_force(plan, lam, k, R), R @ plan.normals_O[k]
-            if j == i and sliding:
-                qdd = self._slide_qdd(obs, R, acc)
-            else:
-                qdd = follow_qdd(model, j, obs.q, obs.qd, plan.tips_O[k], acc, obs.twist[2], R)
-            tau[2 * j:2 * j + 2] = push_torque(model, j, obs.q, obs.qd, qdd, f_W, n_W)
-        return tau
+        return grasp_torques(self.model, plan, lam, acc, obs.pose, obs.twist, obs.q, obs.qd, own)
 
-    def _slide_qdd(self, obs, R: np.ndarray, acc: np.ndarray) -> np.ndarray:
-        """Inverse dynamics towards the moving target: stiff along the face, force across it.
+    def _tip_acc(self, obs, acc: np.ndarray, t: FingerTerms, c: float, s: float
+                 ) -> tuple[float, float]:
+        """The sliding tip's acceleration (world): stiff along the face, force across it.
 
         Along the face the tip tracks the minimum-jerk target with a PD; across it, the tip
         moves with the object (as a holding finger does) and the planned normal force presses.
+        ``t``: the finger's terms, ``c``, ``s``: the object's cos and sin (plain floats).
         """
-        model, i = self.model, self.finger
-        finger = model.fingers[i]
-        c, cd, cdd = min_jerk(np.array([self.c0]), np.array([self.c1]), self.move_s, obs.t)
-        along_W = R @ self.along_O
-        surface_O, _ = model.shape.local_contact(self.contacts.posture.faces[i], float(c[0]))
-        target_W = obs.pose[:2] + R @ (surface_O - model.tip_radius * self.n_O)
-        qi, qdi = obs.q[2 * i:2 * i + 2], obs.qd[2 * i:2 * i + 2]
-        t = finger.terms(qi[0], qi[1], qdi[0], qdi[1])
-        tip = np.array([t.x, t.z])
-        v_tip = np.array([t.j11 * qdi[0] + t.j12 * qdi[1], t.j21 * qdi[0] + t.j22 * qdi[1]])
-        r = tip - obs.pose[:2]
-        omega = obs.twist[2]
-        v_obj = obs.twist[:2] + omega * np.array([-r[1], r[0]])  # object point at the tip
-        a_obj = acc[:2] + acc[2] * np.array([-r[1], r[0]]) - omega**2 * r
-        e_t = float(along_W @ (target_W - tip))
-        ed_t = float(cd[0]) - float(along_W @ (v_tip - v_obj))
-        a_tip = a_obj + along_W * (float(cdd[0]) + self.kp * e_t + self.kd * ed_t)
-        return np.array(damped_qdd(t, a_tip[0], a_tip[1]))
+        i = self.finger
+        coord, cd, cdd = min_jerk_1d(self.c0, self.c1, self.move_s, obs.t)
+        (ox, oz), (nx, nz), (lx, lz), depth, r = self._face
+        # the target: the tip centre a radius off the face at ``coord`` (object frame)
+        px, pz = ox * depth + lx * coord - r * nx, oz * depth + lz * coord - r * nz
+        x, z, th_dot = float(obs.pose[0]), float(obs.pose[1]), float(obs.twist[2])
+        ux, uz = c * lx - s * lz, s * lx + c * lz  # along the face, world
+        qd1, qd2 = float(obs.qd[2 * i]), float(obs.qd[2 * i + 1])
+        vx, vz = t.j11 * qd1 + t.j12 * qd2, t.j21 * qd1 + t.j22 * qd2  # the tip's velocity
+        rx, rz = t.x - x, t.z - z
+        w2 = th_dot**2
+        # the object point at the tip: its velocity and acceleration
+        bx, bz = float(obs.twist[0]) - th_dot * rz, float(obs.twist[1]) + th_dot * rx
+        ax = float(acc[0]) - float(acc[2]) * rz - w2 * rx
+        az = float(acc[1]) + float(acc[2]) * rx - w2 * rz
+        e_t = ux * (x + c * px - s * pz - t.x) + uz * (z + s * px + c * pz - t.z)
+        ed_t = cd - (ux * (vx - bx) + uz * (vz - bz))
+        push = cdd + self.kp * e_t + self.kd * ed_t
+        return ax + ux * push, az + uz * push

@@ -87,6 +87,25 @@ def test_frames_tables_and_skipped_files(sweep):
     assert shaped["success_rate_mean"].tolist() == [pytest.approx(0.3)]
 
 
+def test_reading_in_several_processes_gives_the_same_frames(sweep, monkeypatch):
+    import inhand_exp.analysis.frames as frames_module
+
+    monkeypatch.setattr(frames_module, "PARALLEL_BYTES", 0)  # the pool even for small logs
+    said: dict[int, list[str]] = {1: [], 2: []}
+    one, two = (load([sweep], warn=said[n].append, jobs=n) for n in (1, 2))
+    for name in ("runs", "iterations", "episodes"):
+        pd.testing.assert_frame_equal(getattr(one, name), getattr(two, name))
+    assert one.skipped == two.skipped and len(one.skipped) == 2
+    assert said[1] == said[2] and said[1]
+
+
+def test_cli_refuses_a_jobs_count_below_one(sweep, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main([str(sweep), "--jobs", "0"])
+    assert exit_.value.code == 2
+    assert "--jobs must be a whole number >= 1, not '0'" in capsys.readouterr().err
+
+
 def test_cli_prints_the_table_and_writes_frames_and_plots(sweep, tmp_path, capsys):
     out = tmp_path / "out"
     main([str(sweep / "0"), str(sweep / "1"), "--out", str(out), "--table", "comparison"])

@@ -1,11 +1,13 @@
-"""``inhand-analyze PATH... [--table comparison|robustness|cube] [--format markdown|csv]``
+"""``inhand-analyze PATH... [--table comparison|robustness|cube] [--format markdown|csv]
+[--jobs N]``
 
 Reads every run log (``*.mcap``) below the paths, prints the paper's tables with the mean and
 standard deviation over seeds beside the paper's own figures, and writes into ``--out``
 (default: ``analysis/`` inside the first path): the tidy frames (``runs``, ``iterations``,
 ``episodes``) as CSV and Parquet, each table as CSV, and PNG plots (learning curves with seed
 bands; success and drops by goal group and by perturbation). Corrupt or foreign files are
-skipped with a warning naming them.
+skipped with a warning naming them. Large sets of logs are read by ``--jobs`` processes at
+once (default: one per core).
 """
 
 from __future__ import annotations
@@ -23,6 +25,16 @@ def _write(frame, out: Path, name: str) -> None:
     frame.to_parquet(out / f"{name}.parquet", index=False)
 
 
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"--jobs must be a whole number >= 1, not {text!r}")
+    return n
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-analyze", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -31,9 +43,11 @@ def main(argv: list[str] | None = None) -> None:
                         help="table(s) to print (default: every table with episodes)")
     parser.add_argument("--format", choices=("markdown", "csv"), default="markdown")
     parser.add_argument("--out", type=Path, default=None, help="output directory")
+    parser.add_argument("--jobs", type=_positive, default=None,
+                        help="processes reading the logs (default: one per core)")
     args = parser.parse_args(argv)
     try:
-        frames = load(args.paths, warn=lambda m: print(m, file=sys.stderr))
+        frames = load(args.paths, warn=lambda m: print(m, file=sys.stderr), jobs=args.jobs)
     except FileNotFoundError as err:
         print(f"inhand-analyze: {err}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -6,12 +6,15 @@ MCAP, or no ``/run/config``) is skipped with a warning naming it; nothing else s
 reading. A run directory may hold several logs: a resumed training's legs (``run-2.mcap``...)
 and the attempts of a job that was interrupted and run again (``run-interrupted.mcap``). They
 are read oldest first, and an episode or iteration that a later log of the same directory has
-again counts once, as the later log has it.
+again counts once, as the later log has it. Large sets of logs are read by several processes
+at once (``jobs``); the frames are the same, in the same order, whatever their number.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -19,7 +22,7 @@ from pathlib import Path
 import pandas as pd
 from omegaconf import ListConfig, OmegaConf
 
-from inhand_exp.record.reader import LogError, read_log
+from inhand_exp.record.reader import Log, LogError, read_log
 from inhand_exp.runinfo import CONF_DIR, merged
 
 TOPICS = ("/run/config", "/train/iteration", "/eval/episode")  # what the frames are made of
@@ -29,6 +32,7 @@ NOT_RECIPE = {"seed", "mode", "checkpoint", "goals", "resume", "learner", "objec
               "noise", "train.frames", "train.workers", "train.backend", "train.num_envs",
               "learner.cache_dir"}
 NOT_RECIPE_PREFIXES = ("hydra", "+hydra", "log.", "eval.")
+PARALLEL_BYTES = 32 << 20  # logs smaller than this in all are read in this process
 
 
 def variant(overrides: Iterable[str]) -> str:
@@ -149,16 +153,34 @@ def _run_row(path: Path, cfg: dict, truncated: bool, corrupt: int) -> dict:
             "corrupt_chunks": corrupt}
 
 
-def load(paths: Iterable[str | Path], warn: Callable[[str], None] = print) -> Frames:
-    """The frames of every run log below ``paths``."""
+def _read(path: Path) -> Log | str:
+    """The frames' topics of the log at ``path``, or why it is not a run log."""
+    try:
+        return read_log(path, topics=TOPICS)
+    except (LogError, OSError) as err:
+        return str(err)
+
+
+def _read_all(logs: list[Path], jobs: int | None) -> Iterable[Log | str]:
+    """``_read`` of each of ``logs``, in order: by up to ``jobs`` processes (default: one per
+    core) when they are large enough to pay for starting them."""
+    jobs = min(len(logs), jobs or os.cpu_count() or 1)
+    if jobs < 2 or sum(p.stat().st_size for p in logs) < PARALLEL_BYTES:
+        yield from map(_read, logs)
+        return
+    with ProcessPoolExecutor(jobs) as pool:
+        yield from pool.map(_read, logs)
+
+
+def load(paths: Iterable[str | Path], warn: Callable[[str], None] = print,
+         jobs: int | None = None) -> Frames:
+    """The frames of every run log below ``paths``, read by up to ``jobs`` processes."""
     runs, iterations, episodes, skipped = [], [], [], []
     logs = sorted(find_logs(paths), key=lambda p: (str(p.parent), p.stat().st_mtime, p.name))
-    for path in logs:
-        try:
-            log = read_log(path, topics=TOPICS)
-        except (LogError, OSError) as err:
-            skipped.append((str(path), str(err)))
-            warn(f"inhand-analyze: skipping {path}: not a run log ({err})")
+    for path, log in zip(logs, _read_all(logs, jobs), strict=True):
+        if isinstance(log, str):
+            skipped.append((str(path), log))
+            warn(f"inhand-analyze: skipping {path}: not a run log ({log})")
             continue
         configs = log.topic("/run/config")
         if not configs:

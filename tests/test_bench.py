@@ -89,7 +89,10 @@ def test_env_reports_its_efficiency_from_the_steps_it_counted(capsys):
     assert out["efficiency"] == pytest.approx(out["sim_steps_per_s"] / out["raw_steps_per_s"])
     ms = out["ms_per_action"]
     assert ms["filter"] > 0.0 and ms["execute"] > ms["step_simulation"] > 0.0
-    assert ms["filter"] + ms["execute"] < 1e3 * out["wall_s"] * out["workers"] / out["actions"]
+    worker_ms = 1e3 * out["wall_s"] * out["workers"] / out["actions"]
+    assert ms["filter"] + ms["execute"] < worker_ms
+    assert out["physics_share"] == pytest.approx(ms["step_simulation"] / worker_ms)
+    assert 0.0 < out["physics_share"] < 1.0
 
 
 def test_flips_counts_every_flip_it_checks_once(capsys):

@@ -6,6 +6,11 @@ environments took per second (``sim_steps_per_s``, counted by the worlds themsel
 the same number of processes would take calling bare ``stepSimulation`` (``raw_steps_per_s``,
 measured in this run, times the workers): the share of the machine the physics gets. The rest
 goes to the feasibility filter, the controllers' Python, TorchRL and the policy.
+
+``physics_share`` is the same share taken within the run: the wall time the workers spent
+inside ``stepSimulation`` over all the worker time (the run's wall time times the workers).
+Both of its terms are measured over the same seconds, so a machine whose speed drifts between
+the raw measurement and the run moves it much less than ``efficiency``.
 """
 
 from __future__ import annotations
@@ -54,6 +59,7 @@ def env_throughput(cfg: DictConfig, workers: int, steps: int, seed: int,
            "sim_steps": sim_steps, "sim_steps_per_action": sim_steps / actions,
            "sim_steps_per_s": sim_steps / wall, "raw_steps_per_core": raw_steps_per_core,
            "raw_steps_per_s": raw, "efficiency": sim_steps / wall / raw,
+           "physics_share": float(spent[2]) / (wall * used),
            "physics_dt_s": cfg.sim.timestep_s,
            # per action, in the environments' own processes (ms): the feasibility filter,
            # executing the primitive, and stepSimulation inside that
@@ -63,7 +69,8 @@ def env_throughput(cfg: DictConfig, workers: int, steps: int, seed: int,
     print(f"{used} worker(s) x {per} envs: {out['actions_per_s']:.1f} actions/s "
           f"({actions} actions in {wall:.1f} s, {sim_s / actions:.2f} s simulated each); "
           f"physics {out['sim_steps_per_s']:.0f} steps/s of {raw:.0f} raw: "
-          f"efficiency {out['efficiency']:.1%}")
+          f"efficiency {out['efficiency']:.1%} (inside stepSimulation: "
+          f"{out['physics_share']:.1%} of the workers' time)")
     ms = out["ms_per_action"]
     print(f"per action, in each worker: filter {ms['filter']:.1f} ms, execute "
           f"{ms['execute']:.1f} ms (stepSimulation {ms['step_simulation']:.1f} ms); "

@@ -185,3 +185,32 @@ def test_reach_splits_the_cube_goals_by_posture(capsys):
     assert lo < 0.0 < hi and out["three_finger_states"] <= out["states"]
     with pytest.raises(SystemExit, match="set goals.x0"):
         main(["reach", "--object", "cube"])
+
+
+def test_fingerprint_repeats_and_tells_a_changed_run_apart(capsys, tmp_path):
+    kept = tmp_path / "run.npz"
+    main(["fingerprint", "--actions", "6", "--out", str(kept)])
+    first = last_json(capsys)
+    main(["fingerprint", "--actions", "6", "--against", str(kept)])
+    again = last_json(capsys)
+    assert again["fingerprint"] == first["fingerprint"] and sum(first["outcomes"].values()) == 6
+    assert again["against"] == {"masks_differing": 0, "outcomes_differing": 0,
+                                "max_pose_diff": 0.0}
+    main(["fingerprint", "--actions", "6", "--seed", "1"])
+    assert last_json(capsys)["fingerprint"] != first["fingerprint"]
+    # the torque law at every physics step: other states, so another fingerprint
+    main(["fingerprint", "--actions", "6", "--against", str(kept), "sim.control_substeps=1"])
+    changed = last_json(capsys)
+    assert changed["fingerprint"] != first["fingerprint"]
+    assert changed["against"]["max_pose_diff"] > 0.0
+
+
+def test_fingerprint_refuses_a_run_of_another_length_or_a_foreign_file(capsys, tmp_path):
+    kept = tmp_path / "run.npz"
+    main(["fingerprint", "--actions", "3", "--out", str(kept)])
+    with pytest.raises(SystemExit, match="holds 3 actions, this run plays 4"):
+        main(["fingerprint", "--actions", "4", "--against", str(kept)])
+    junk = tmp_path / "junk.npz"
+    junk.write_text("not numpy\n")
+    with pytest.raises(SystemExit, match="not a fingerprint run kept with --out"):
+        main(["fingerprint", "--actions", "3", "--against", str(junk)])

@@ -10,6 +10,8 @@
     inhand-bench torques [--trials N] [--actions N] [--seed S] [overrides...]
     inhand-bench goals [--pairs N] [--seed S] [overrides...]
     inhand-bench reach --object cube [--pairs N] [--run EVAL_DIR] [--opposite-only] [overrides...]
+    inhand-bench fingerprint [--actions N] [--seed S] [--out RUN.npz] [--against RUN.npz]
+                             [overrides...]
 
 Overrides are Hydra overrides of the project config (e.g. ``sim.timestep_s=0.002``).
 """
@@ -24,6 +26,7 @@ import zlib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 from hydra import compose, initialize_config_dir
@@ -184,7 +187,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("what", choices=("speed", "primitives", "env", "graph", "load",
-                                         "flips", "torques", "goals", "reach"))
+                                         "flips", "torques", "goals", "reach",
+                                         "fingerprint"))
     parser.add_argument("--minutes", type=float, default=30.0, help="load: how long")
     parser.add_argument("--object", choices=("pole", "cube"), default="pole")
     parser.add_argument("--trials", type=int, default=None,
@@ -194,7 +198,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=8,
                         help="env: steps of the whole batch (train.num_envs actions each)")
     parser.add_argument("--actions", type=int, default=200,
-                        help="torques: random mid-level actions whose torques are recorded")
+                        help="torques: random mid-level actions whose torques are recorded; "
+                             "fingerprint: random allowed actions played")
     parser.add_argument("--only", default="", help="comma-separated sections")
     parser.add_argument("--pairs", type=int, default=20,
                         help="goals: pairs drawn per group; reach: test pairs checked")
@@ -202,6 +207,10 @@ def main(argv: list[str] | None = None) -> None:
                         help="reach: evaluation logs of the same goals, split by reach")
     parser.add_argument("--opposite-only", action="store_true",
                         help="reach: only two fingers on opposite faces carry the cube")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="fingerprint: keep this run's masks, outcomes and poses (.npz)")
+    parser.add_argument("--against", type=Path, default=None,
+                        help="fingerprint: compare with a run kept by --out")
     parser.add_argument("--seconds", type=float, default=5.0, help="speed: loop timing budget")
     parser.add_argument("--primitive-runs", type=int, default=5,
                         help="speed: runs per primitive for the wall time")
@@ -211,6 +220,8 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"--trials must be > 0, got {args.trials}")
     if args.pairs <= 0:
         parser.error(f"--pairs must be > 0, got {args.pairs}")
+    if args.actions <= 0:
+        parser.error(f"--actions must be > 0, got {args.actions}")
     learner = {"graph": ["learner=search", "mode=eval"],
                "torques": ["learner=ddpg", "mode=train"]}.get(args.what, [])
     try:
@@ -246,6 +257,13 @@ def main(argv: list[str] | None = None) -> None:
         try:
             result = goal_reach(cfg, args.pairs, run=args.run,
                                 opposite_only=args.opposite_only)
+        except ConfigError as err:
+            sys.exit(f"inhand-bench: {err}")
+    elif args.what == "fingerprint":
+        from inhand_exp.bench.fingerprint import fingerprint
+
+        try:
+            result = fingerprint(cfg, args.actions, args.seed, args.out, args.against)
         except ConfigError as err:
             sys.exit(f"inhand-bench: {err}")
     elif args.what == "env":

@@ -105,7 +105,7 @@ class VertexLP:
     MAX_DIM = 3
     _COMBOS: dict[tuple[int, int], np.ndarray] = {}
     _BOUNDS: dict[tuple[int, bytes, bytes], np.ndarray] = {}  # the bounds' rows of C, by pattern
-    _PAIRS: dict[tuple[int, int], tuple] = {}  # pairs of rows and where each choice finds them
+    _PAIRS: dict[int, tuple] = {}  # by row count: pairs of rows, where each choice finds them
 
     def __init__(self, c: np.ndarray, A_eq: np.ndarray, A_ub: np.ndarray | None,
                  b_ub: np.ndarray | None, lower: np.ndarray, upper: np.ndarray):
@@ -169,18 +169,19 @@ class VertexLP:
     @classmethod
     def _cofactors3(cls, rows: np.ndarray, combos: np.ndarray) -> np.ndarray:
         """``[r1 x r2, r2 x r0, r0 x r1]`` (k, 3, 3) for each choice ``(r0, r1, r2)`` of
-        ``rows``: the cross product of each pair of rows is computed once and shared by the
-        choices holding it (a reversed pair is the same product negated, exactly)."""
+        ``rows`` (``combos``: every choice of three, in order, as ``_COMBOS`` holds them, so
+        the row count says which they are): the cross product of each pair of rows is
+        computed once and shared by the choices holding it (a reversed pair is the same
+        product negated, exactly)."""
         p = len(rows)
-        key = (p, len(combos))
-        index = cls._PAIRS.get(key)
+        index = cls._PAIRS.get(p)
         if index is None:
             a, b = np.triu_indices(p, 1)
             slot = np.zeros((p, p), dtype=np.intp)
             slot[a, b] = np.arange(len(a))
             c0, c1, c2 = combos.T  # increasing within a choice
             # the products r1 x r2 and r0 x r1 are pairs in order; r2 x r0 is -(r0 x r2)
-            index = cls._PAIRS[key] = (a, b, np.stack([slot[c1, c2], slot[c0, c2],
+            index = cls._PAIRS[p] = (a, b, np.stack([slot[c1, c2], slot[c0, c2],
                                                        slot[c0, c1]], axis=1))
         a, b, pick = index
         pairs = _cross(rows[a], rows[b])

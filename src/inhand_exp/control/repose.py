@@ -52,18 +52,17 @@ class GraspPlan:
 
     @classmethod
     def from_state(cls, model: HandModel, contacts, pose: np.ndarray, q: np.ndarray,
-                   gains: PrimitivesConfig, sliding: int | None = None, drag: float = 0.0,
-                   geometry: tuple | None = None) -> GraspPlan:
+                   gains: PrimitivesConfig, sliding: int | None = None, drag: float = 0.0
+                   ) -> GraspPlan:
         """Plan for ``contacts`` (which fingers and faces) at the fingertips' measured places.
 
         Each active tip is projected onto its face: the contact coordinate comes from the
         joints (measured) and the object pose (observed), not from a commanded target. The
         ``sliding`` finger gets a normal force plus ``drag`` times it along the contact
-        tangent (kinetic friction; zero for a frictionless push). ``geometry``: what
-        ``measured_geometry`` gives for these arguments, when the caller has it already.
+        tangent (kinetic friction; zero for a frictionless push).
         """
-        geometry = geometry or measured_geometry(model, contacts, pose, q)
-        return cls._planned(model, *geometry, gains, sliding, drag)
+        return cls._planned(model, *measured_geometry(model, contacts, pose, q), gains,
+                            sliding, drag)
 
     @classmethod
     def from_contacts(cls, model: HandModel, contacts, gains: PrimitivesConfig,
@@ -117,8 +116,7 @@ def plan_for(model: HandModel, contacts, obs, gains: PrimitivesConfig, sliding: 
         geometry = obs.plans.get(where)
         if geometry is None:
             geometry = obs.plans[where] = measured_geometry(model, contacts, obs.pose, obs.q)
-        plan = GraspPlan.from_state(model, contacts, obs.pose, obs.q, gains, sliding, drag,
-                                    geometry)
+        plan = GraspPlan._planned(model, *geometry, gains, sliding, drag)
         obs.plans[key] = plan
     return plan
 

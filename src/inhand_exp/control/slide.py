@@ -84,9 +84,8 @@ class Slide:
             return f"finger {i} is not in contact"
         face = c.posture.faces[i]
         self.n_O, self.along_O = face_axes(face)
-        self._face = (tuple(map(float, -self.n_O)), tuple(map(float, self.n_O)),
-                      tuple(map(float, self.along_O)), model.shape.depth(face),
-                      model.tip_radius)  # outward, inward, along, depth, tip radius
+        self._face = (tuple(map(float, self.n_O)), tuple(map(float, self.along_O)),
+                      model.shape.depth(face), model.tip_radius)  # inward, along, depth, radius
         # the geometric checks first: they cost microseconds, the force plans milliseconds
         R = rotation(obs.pose[2])
         # where the face really is: the tip touches it, so its gap to the nominal face is the
@@ -191,9 +190,9 @@ class Slide:
         """
         i = self.finger
         coord, cd, cdd = min_jerk_1d(self.c0, self.c1, self.move_s, obs.t)
-        (ox, oz), (nx, nz), (lx, lz), depth, r = self._face
+        (nx, nz), (lx, lz), depth, r = self._face
         # the target: the tip centre a radius off the face at ``coord`` (object frame)
-        px, pz = ox * depth + lx * coord - r * nx, oz * depth + lz * coord - r * nz
+        px, pz = -nx * depth + lx * coord - r * nx, -nz * depth + lz * coord - r * nz
         x, z, th_dot = float(obs.pose[0]), float(obs.pose[1]), float(obs.twist[2])
         ux, uz = c * lx - s * lz, s * lx + c * lz  # along the face, world
         qd1, qd2 = float(obs.qd[2 * i]), float(obs.qd[2 * i + 1])

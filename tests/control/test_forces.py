@@ -214,37 +214,43 @@ def test_wrench_beyond_f_max_is_infeasible(w):
     _check_lam(G, lam, w, f_max=np.inf)
 
 
+@pytest.mark.parametrize("firm", [False, True])
 @pytest.mark.parametrize("seed", range(6))
-def test_landing_span_bounds_every_strict_hold(seed):
-    """Wherever a finger moved to the other face admits a strict squeeze, its coordinate lies
-    inside ``landing_span``; just outside the span none does."""
+def test_landing_span_bounds_every_strict_hold(seed, firm):
+    """Wherever a finger moved to the other face admits a strict squeeze (``firm``: with at
+    least ``min_grasp_margin`` of slack), its coordinate lies inside ``landing_span``; just
+    outside the span none does, and well inside it every one does."""
     from inhand_exp.control.flip import OPPOSITE
     from inhand_exp.control.repose import landing_span, strict_hold
     from inhand_exp.control.sample import random_grasp
 
     model = HandModel.from_config(HandConfig(), ObjectConfig(), SimConfig().gravity_mps2)
+    gains = PrimitivesConfig()
     rng = np.random.default_rng(seed)
     _, contacts, _ = random_grasp(model, rng)
     grid = np.linspace(-0.24, 0.24, 97)
+
+    def holds(finger, face, c):
+        return strict_hold(model, contacts.moved(finger, coord=float(c), face=face), gains,
+                           firm=firm)
+
     spans = 0
     for finger in range(3):
         face = OPPOSITE[contacts.posture.faces[finger]]
-        span = landing_span(model, contacts, finger, face, PrimitivesConfig())
-        held = [c for c in grid if strict_hold(
-            model, contacts.moved(finger, coord=float(c), face=face), PrimitivesConfig())]
+        span = landing_span(model, contacts, finger, face, gains, firm=firm)
+        held = [c for c in grid if holds(finger, face, c)]
         if span is None:
             assert held == []
             continue
         spans += 1
         lo, hi = span
         assert all(lo - 1e-6 <= c <= hi + 1e-6 for c in held), (finger, span, held)
+        assert all(c in held for c in grid if lo + 1e-5 <= c <= hi - 1e-5), (finger, span)
         for c in (lo - 1e-3, hi + 1e-3):
             if abs(c) < 0.25:
-                assert not strict_hold(model, contacts.moved(finger, coord=c, face=face),
-                                       PrimitivesConfig())
+                assert not holds(finger, face, c)
         if hi - lo > 0.02:  # well inside a wide span the grasp holds
-            assert strict_hold(model, contacts.moved(finger, coord=(lo + hi) / 2, face=face),
-                               PrimitivesConfig())
+            assert holds(finger, face, (lo + hi) / 2)
     assert spans >= 1
 
 

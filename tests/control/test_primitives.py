@@ -645,15 +645,20 @@ def test_pole_into_the_palm_is_rejected(nominal_model):
 @pytest.mark.parametrize("shift", [0.0, 0.02, -0.03])
 def test_flip_landing_is_the_same_without_the_span_pruning(nominal_model, make_world,
                                                           monkeypatch, finger, shift):
-    """``landing_span`` only skips landing places that cannot hold: the flip plans the same."""
+    """``landing_span`` only skips landing places that cannot hold firmly, and only vouches
+    for those that do: the flip plans the same as when every place is asked of its LP."""
     import inhand_exp.control.flip as flip_module
+    from inhand_exp.control.repose import strict_hold
 
     base = FLIP_SETUPS[finger]
     contacts = base.moved(finger, coord=base.coords[finger] + shift)
     obs = observe(make_world(contacts, XF))
     pruned = Flip(nominal_model, contacts, finger, FLIP_S)
     why = pruned.start(obs)
-    monkeypatch.setattr(flip_module, "landing_span", lambda *a: (-math.inf, math.inf))
+    monkeypatch.setattr(flip_module, "landing_span", lambda *a, **k: (-math.inf, math.inf))
+    monkeypatch.setattr(flip_module, "holds_firmly", lambda model, c, i, face, coord, span,
+                        gains: strict_hold(model, c.moved(i, coord=coord, face=face), gains,
+                                           firm=True))
     full = Flip(nominal_model, contacts, finger, FLIP_S)
     assert full.start(obs) == why
     assert why is None and pruned.coord == full.coord

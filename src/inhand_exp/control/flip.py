@@ -40,7 +40,7 @@ from inhand_exp.control.sample import elongated
 
 OPPOSITE = {Face.TOP: Face.BOTTOM, Face.BOTTOM: Face.TOP,
             Face.LEFT: Face.RIGHT, Face.RIGHT: Face.LEFT}
-SPAN_TOL_M = 1e-6  # slack on landing_span's bounds (LP tolerance): they only prune the search
+SPAN_TOL_M = 1e-5  # landing_span's bounds are trusted this far inside and outside of them
 PHASES = {"unload": 0.12, "travel": 0.55, "touch": 0.1, "load": 0.1}  # the rest settles
 
 
@@ -51,6 +51,16 @@ def phase_times(duration_s: float, phases: dict[str, float]) -> dict[str, tuple[
         times[name] = (t, t + frac * duration_s)
         t += frac * duration_s
     return times
+
+
+def holds_firmly(model: HandModel, contacts: Contacts, finger: int, face: Face, coord: float,
+                 span: tuple[float, float], gains: PrimitivesConfig) -> bool:
+    """``strict_hold(..., firm=True)`` of ``finger`` landed at ``coord`` on ``face``, known
+    without its LP well inside ``span`` (``landing_span(..., firm=True)``, the coordinates
+    where such a landing holds firmly) and asked near its ends."""
+    if span[0] + SPAN_TOL_M <= coord <= span[1] - SPAN_TOL_M:
+        return True
+    return strict_hold(model, contacts.moved(finger, coord=coord, face=face), gains, firm=True)
 
 
 def pair_holds(model: HandModel, contacts: Contacts, finger: int, obs, gains: PrimitivesConfig
@@ -196,7 +206,7 @@ class Flip:
         """The landing coordinate and the finger's joint path, nearest the present first."""
         model, i = self.model, self.finger
         pose, R = obs.pose, rotation(obs.pose[2])
-        span = landing_span(model, self.contacts, i, OPPOSITE[face], self.gains)
+        span = landing_span(model, self.contacts, i, OPPOSITE[face], self.gains, firm=True)
         if span is None:
             return None
         q0 = obs.q[2 * i:2 * i + 2].copy()
@@ -247,9 +257,8 @@ class Flip:
             q_hover = self._ik_clear(hover(hx, hz, new_face, coord, r + g + self.clearance),
                                      pose, R, model.clearance, prefer=branch,
                                      check_pose=at_new)
-            if q_hover is None or not space.ok(q_hover) or not strict_hold(
-                    model, self.contacts.moved(i, coord=coord, face=new_face), self.gains,
-                    firm=True):
+            if q_hover is None or not space.ok(q_hover) or not holds_firmly(
+                    model, self.contacts, i, new_face, coord, span, self.gains):
                 continue
             tries += 1
             way = plan_joint_path(space, q_lift, q_hover)

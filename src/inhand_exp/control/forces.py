@@ -82,8 +82,8 @@ def has_strict_squeeze(G: np.ndarray, mu: float, least: float = MARGIN) -> bool:
     return margin > max(least, MARGIN)
 
 
-def strict_span(G0: np.ndarray, col: int, k: float, mu: float, bound: float
-                ) -> tuple[float, float] | None:
+def strict_span(G0: np.ndarray, col: int, k: float, mu: float, bound: float,
+                least: float = 0.0) -> tuple[float, float] | None:
     """Where along its face one contact may sit for a strict squeeze to be possible.
 
     The contact whose normal force is column ``col`` of ``G0`` moves along a straight face: at
@@ -92,13 +92,22 @@ def strict_span(G0: np.ndarray, col: int, k: float, mu: float, bound: float
     forces inside the closed cones with that normal force 1 and ``G(c) lam = 0``, so
     ``c = -(G0 lam)_tau / k``, linear in ``lam``: two LPs bound it. Outside ``(lo, hi)`` (both
     clipped to +-``bound``) no strict squeeze exists; None: none anywhere.
+
+    ``least``: bound instead the places where the deepest squeeze has a slack of at least
+    ``least`` per newton of total squeeze (``has_strict_squeeze``'s ``margin``): every slack
+    ``f_n``, ``mu f_n -+ f_t`` at least ``least`` times the sum of the normal forces, which is
+    linear in ``lam`` too.
     """
     m = G0.shape[1]
     coord = -G0[2] / k  # c as a function of the forces
     A_eq = np.vstack([G0[:2], np.eye(m)[col]])
     b_eq = np.array([0.0, 0.0, 1.0])
-    A_ub = np.vstack([_cone_rows(m // 2, mu), coord, -coord])
-    b_ub = np.concatenate([np.zeros(m), [bound, bound]])
+    cones = _cone_rows(m // 2, mu)
+    if least > 0:
+        total = np.tile([least, 0.0], m // 2)  # least times the sum of the normal forces
+        cones = np.vstack([cones + total, -np.eye(m)[0::2] + total])
+    A_ub = np.vstack([cones, coord, -coord])
+    b_ub = np.concatenate([np.zeros(len(cones)), [bound, bound]])
     lower, upper = np.tile([0.0, -np.inf], m // 2), np.full(m, np.inf)
     ends = []
     for sign in (1.0, -1.0):

@@ -157,18 +157,20 @@ def firm_enough(squeeze: Squeeze, gains: PrimitivesConfig) -> bool:
     return not squeeze.usable or squeeze.margin >= gains.min_grasp_margin
 
 
-def landing_span(model: HandModel, contacts: Contacts, finger: int, face, gains: PrimitivesConfig
-                 ) -> tuple[float, float] | None:
+def landing_span(model: HandModel, contacts: Contacts, finger: int, face, gains: PrimitivesConfig,
+                 firm: bool = False) -> tuple[float, float] | None:
     """Bounds on the coordinates along ``face`` where ``finger`` can join the other contacts in
-    a grasp that ``strict_hold`` accepts (two LPs, ``forces.strict_span``): a search over
-    landing places can skip everything outside them. None: no place on ``face`` will do."""
+    a grasp that ``strict_hold`` accepts (with ``firm``: ``strict_hold(..., firm=True)``; two
+    LPs, ``forces.strict_span``): a search over landing places can skip everything outside
+    them. None: no place on ``face`` will do."""
     at0 = contacts.moved(finger, coord=0.0, face=face)
     act = [i for i in range(3) if at0.active[i]]
     pts, nrm = contact_frames(model.shape, at0, np.zeros(3))
     inward, along = face_axes(face)
     G0 = grasp_matrix(pts[act], nrm[act])
     return strict_span(G0, 2 * act.index(finger), cross2(along, inward),
-                       model.mu * gains.friction_margin, model.shape.half_extent(face) + 1.0)
+                       model.mu * gains.friction_margin, model.shape.half_extent(face) + 1.0,
+                       gains.min_grasp_margin if firm else 0.0)
 
 
 def min_jerk(start: np.ndarray, goal: np.ndarray, duration: float, t: float

@@ -205,7 +205,8 @@ def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
     assert "6 hard pairs written" in res.stdout and "need a flip" in res.stdout
     assert not (tmp_path / "set" / "policy.pt").exists()  # no policy involved
     model = HandModel.from_config(HandConfig(), ObjectConfig(), 9.81)
-    back, made = load_goals(path), goal_set(model, "hard", 6, seed=1234)
+    back, made = load_goals(path), goal_set(model, "hard", 6, seed=1234, flip_share=0.25)
+    assert made[3].needs_flip  # the config's flip share: every 4th hard test pair needs one
     assert [(p.contacts.posture, p.needs_flip, p.lone_down) for p in back] == [
         (p.contacts.posture, p.needs_flip, p.lone_down) for p in made]
     for a, b in zip(back, made, strict=True):

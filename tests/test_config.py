@@ -126,6 +126,8 @@ def test_wrong_type_names_the_key(compose_cfg, override, key):
     ("hand.link_lengths_m=[0.16,0]", "hand.link_lengths_m[1] must be > 0, got 0.0"),
     ("hand.finger_base_x_m=[0,1]", "hand.finger_base_x_m must have 3 entries, got 2"),
     ("object.mass_kg=nan", "object.mass_kg must be a finite number, got nan"),
+    ("goals.hard_flip_share=1.5", "goals.hard_flip_share must be <= 1, got 1.5"),
+    ("goals.hard_flip_share=-0.1", "goals.hard_flip_share must be >= 0, got -0.1"),
     ("goals.train_groups=[easy,hardest]",
      "goals.train_groups[1] must be one of ['easy', 'medium', 'hard', 'flip'], got 'hardest'"),
 ])

@@ -19,7 +19,7 @@ class ConfigError(ValueError):
 def spec(default: Any, doc: str, **rules: Any) -> Any:
     """A dataclass field with a docstring and validation rules.
 
-    Rules: ``gt``/``ge`` (numbers, applied to every element of a list), ``choices`` (allowed
+    Rules: ``gt``/``ge``/``le`` (numbers, applied to every element of a list), ``choices`` (allowed
     values), ``length`` (exact list length).
     """
     meta = {"doc": doc, **rules}
@@ -164,6 +164,12 @@ class GoalsConfig:
                                   "posture than the start's (other, as the authors' code drew "
                                   "them; arbitrary pairs need a flip too rarely) or any pose "
                                   "the hand holds (any).", choices=("other", "any"))
+    hard_flip_share: float = spec(0.25, "Share of a pole's hard test pairs drawn from those "
+                                  "that need a flip: pair i is one when floor((i + 1) * share) "
+                                  "> floor(i * share) (every 4th at 0.25); the others are "
+                                  "drawn as before, and about 13 % of those need a flip too. "
+                                  "0: none drawn so (the set before this option). Test sets "
+                                  "only; training draws are unchanged.", ge=0, le=1)
     reachable_only: bool = spec(True, "Keep only hard pairs whose goal the action set can "
                                 "reach: flips lead to a posture that holds it. With the "
                                 "paper's flips (left and right finger) the middle finger never "
@@ -407,6 +413,8 @@ def _check_value(key: str, value: Any, rules: Any) -> None:
             raise ConfigError(f"{name} must be > {rules['gt']}, got {v}")
         if "ge" in rules and not v >= rules["ge"]:
             raise ConfigError(f"{name} must be >= {rules['ge']}, got {v}")
+        if "le" in rules and not v <= rules["le"]:
+            raise ConfigError(f"{name} must be <= {rules['le']}, got {v}")
         if "choices" in rules and v not in rules["choices"]:
             raise ConfigError(f"{name} must be one of {list(rules['choices'])}, got {v!r}")
 

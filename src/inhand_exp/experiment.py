@@ -228,7 +228,8 @@ def test_goals(cfg) -> list[GoalPair]:
     return goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed,
                     workspace=Workspace.from_config(cfg.task),
                     hard_posture=cfg.goals.hard_goal_posture, start=start_of(model, cfg.goals),
-                    fits=fits, fingers=reach_fingers(model, cfg))
+                    fits=fits, fingers=reach_fingers(model, cfg),
+                    flip_share=cfg.goals.hard_flip_share)
 
 
 def write_goal_set(cfg, run_dir: Path, say) -> Path:

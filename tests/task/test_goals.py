@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -13,6 +15,7 @@ from inhand_exp.task.goals import (
     GoalsError,
     fixed_start,
     flip_distances,
+    flip_slot,
     flips_to,
     goal_set,
     holds_near,
@@ -178,6 +181,30 @@ def test_a_perturbed_set_starts_on_the_simulated_object_and_keeps_the_pairs_that
     assert misfits and all(fits(p) for p in perturbed)
     for i, (a, b) in enumerate(zip(nominal, perturbed, strict=True)):
         assert np.array_equal(a.xg, b.xg) == (i not in misfits)
+
+
+@pytest.mark.parametrize("share", [0.25, 0.4, 1.0])
+def test_flip_slots_hold_the_share(share):
+    for k in (1, 4, 10, 500):
+        assert sum(flip_slot(i, share) for i in range(k)) == math.floor(k * share)
+    assert not any(flip_slot(i, 0.0) for i in range(100))
+
+
+def test_a_hard_set_with_a_flip_share_needs_flips_in_its_slots_and_keeps_the_other_pairs(
+        model):
+    """Every 4th pair of the hard set needs a flip; the others are the pairs of the set
+    without the share, and a medium set is not touched."""
+    plain = goal_set(model, "hard", 8, seed=1234)
+    mixed = goal_set(model, "hard", 8, seed=1234, flip_share=0.25)
+    for i, (a, b) in enumerate(zip(plain, mixed, strict=True)):
+        if i in (3, 7):
+            assert b.needs_flip and b.group == "hard"
+            assert not holds_near(model, b.contacts.posture, b.xg)  # by the model, not a flag
+        else:
+            assert np.array_equal(a.xg, b.xg) and a.contacts == b.contacts
+    medium = goal_set(model, "medium", 4, seed=1234, flip_share=0.25)
+    assert [p.xg.tolist() for p in medium] == [
+        p.xg.tolist() for p in goal_set(model, "medium", 4, seed=1234)]
 
 
 def test_save_load_round_trip_and_no_overwrite(model, tmp_path):

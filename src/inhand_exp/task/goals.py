@@ -8,7 +8,9 @@ X0 is a pose of the workspace with a random grasp that holds it. Then:
   other contact coordinates, so sliding may be needed;
 - hard: Xg is a pose of the workspace held by a grasp of another posture than X0's
   (``hard_goal_posture="other"``, the default, as the authors' own code drew its hard goals);
-  with ``any``, any pose some grasp holds.
+  with ``any``, any pose some grasp holds. A pole's hard test set draws a share of its pairs
+  (``flip_share``, ``goals.hard_flip_share``: every 4th at 0.25) from the pairs that need a
+  flip, since arbitrary ones need one too rarely (13 % of the reachable "other" pairs).
 
 X0 and Xg are drawn uniformly from the part of the workspace the hand holds
 (``sample.random_grasp``), so poses only one posture holds (large tilts) are as likely as the
@@ -39,6 +41,7 @@ distribution (split "train") by construction of the streams.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -281,19 +284,35 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
     raise GeometryError(f"no {group} goal pair found in {max_tries} tries")
 
 
+def flip_slot(i: int, share: float) -> bool:
+    """Pair ``i`` of a hard set with a flip share ``share`` is drawn from the pairs that need a
+    flip: ``floor((i + 1) * share) > floor(i * share)``, so the first ``k`` pairs hold
+    ``floor(k * share)`` such slots (pairs 3, 7, 11, ... at 0.25)."""
+    return math.floor((i + 1) * share) > math.floor(i * share)
+
+
 def goal_set(model: HandModel, group: str, n: int, seed: int, split: str = "test",
              workspace: Workspace | None = None, hard_posture: str = "other",
              start: Start | None = None, fits=None,
-             fingers: tuple[int, ...] | None = FLIP_FINGERS) -> list[GoalPair]:
+             fingers: tuple[int, ...] | None = FLIP_FINGERS,
+             flip_share: float = 0.0) -> list[GoalPair]:
     """``n`` pairs of ``group``; pair ``i`` depends only on (seed, group, split, i), ``start``
-    and, where they reject the first draw, ``fits`` and ``fingers`` (see ``sample_pair``)."""
+    and, where they reject the first draw, ``fits`` and ``fingers`` (see ``sample_pair``).
+
+    With ``flip_share`` (a pole's hard set), the pairs of ``flip_slot`` are drawn, from the
+    same generator, as pairs that need a flip (the ``flip`` group); the others are the pairs
+    the set holds without it."""
     if group not in GROUPS:
         raise ValueError(f"goal group must be one of {GROUPS}, got {group!r}")
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if not 0.0 <= flip_share <= 1.0:
+        raise ValueError(f"flip_share must be within [0, 1], got {flip_share}")
     g, s = GROUPS.index(group), SPLITS.index(split)
-    pairs = [sample_pair(model, group, np.random.default_rng([seed, g, s, i]), workspace,
-                         hard_posture, start=start, fits=fits, fingers=fingers)
+    share = flip_share if group == "hard" and elongated(model) else 0.0
+    pairs = [sample_pair(model, "flip" if flip_slot(i, share) else group,
+                         np.random.default_rng([seed, g, s, i]), workspace, hard_posture,
+                         start=start, fits=fits, fingers=fingers)
              for i in range(n)]
     return [with_lone_down(model, p) for p in pairs]
 

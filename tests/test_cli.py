@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -272,6 +274,58 @@ def test_resume_continues_an_interrupted_training_in_its_run_directory(tmp_path)
     done = inhand_exp(f"resume={run_dir}", "train.frames=24", cwd=tmp_path, fast=False)
     assert done.returncode == 2 and "the training is finished (24 of" in done.stderr
     assert not (run_dir / "run-3.mcap").exists()  # nothing written for it
+
+
+def _stopped_by(sig: int, args: list[str], run_dir: Path, wait_for: Path, group: bool,
+                cwd: Path) -> subprocess.CompletedProcess[str]:
+    """Run ``inhand-exp args`` with two environment workers, send ``sig`` once ``wait_for``
+    exists (to the whole process group, as Ctrl-C does, or to the main process alone)."""
+    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
+    proc = subprocess.Popen([*APP, *args, f"hydra.run.dir={run_dir}"], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not wait_for.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert proc.poll() is None, proc.stderr.read()
+        os.killpg(proc.pid, sig) if group else proc.send_signal(sig)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+def test_an_interrupted_training_stops_cleanly_and_says_how_to_go_on(tmp_path):
+    run_dir = tmp_path / "run"
+    train = ["mode=train", "train.frames=100000", "learner.frames_per_batch=8",
+             "learner.minibatch_size=4", "train.num_envs=2", "train.workers=2",
+             "train.backend=parallel", "learner.epochs=1", "task.max_actions=2"]
+    # Ctrl-C: SIGINT to every process of the group, the two workers included
+    res = _stopped_by(signal.SIGINT, train, run_dir, run_dir / "policy.pt", True, tmp_path)
+    assert res.returncode == 128 + signal.SIGINT, res.stderr
+    assert "Traceback" not in res.stderr  # neither the main process's nor a worker's
+    assert f"stopped by SIGINT; {run_dir} keeps the log" in res.stderr
+    assert f"Continue with: inhand-exp resume={run_dir}" in res.stderr
+    assert not (run_dir / "done.json").exists()
+    first = read_log(run_dir / "run.mcap")
+    assert not first.truncated  # closed on the way out, not cut
+    done = [m["iteration"] for m in first.topic("/train/iteration")]
+    assert done and done == list(range(1, len(done) + 1))
+    kept = (run_dir / "run.mcap").read_bytes()
+    # the command it names goes on from there; a SIGTERM to the main process alone (kill)
+    # stops it the same way
+    res = _stopped_by(signal.SIGTERM, [f"resume={run_dir}"], run_dir, run_dir / "run-2.mcap",
+                      False, tmp_path)
+    assert res.returncode == 128 + signal.SIGTERM, res.stderr
+    assert "Traceback" not in res.stderr
+    assert "stopped by SIGTERM" in res.stderr and f"resume={run_dir}" in res.stderr
+    assert (run_dir / "run.mcap").read_bytes() == kept  # nothing already written is lost
+    second = read_log(run_dir / "run-2.mcap")
+    assert not second.truncated
+    later = [m["iteration"] for m in second.topic("/train/iteration")]
+    assert all(i > done[-1] for i in later)
 
 
 def test_resume_refuses_what_it_cannot_resume(tmp_path):

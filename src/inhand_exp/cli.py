@@ -9,6 +9,7 @@ run's own overrides (``RUN_DIR/.hydra/overrides.yaml``) followed by the new ones
 from __future__ import annotations
 
 import json
+import signal
 import sys
 from pathlib import Path
 
@@ -127,6 +128,50 @@ def resume_argv(argv: list[str]) -> list[str]:
             "hydra.output_subdir=null"]
 
 
+class Interrupted(KeyboardInterrupt):
+    """A SIGTERM (``kill``, a scheduler's time limit) raised in the main thread, so that it
+    stops a run as Ctrl-C does: the log is closed and the environment workers are shut down."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _raise_interrupted(signum: int, frame) -> None:
+    raise Interrupted(signum)
+
+
+def interrupted_note(cfg: DictConfig, run_dir: Path, signum: int, in_sweep: bool) -> str:
+    """What a run stopped by ``signum`` left in ``run_dir``, and the command that goes on."""
+    from inhand_exp.learn.checkpoint import read_checkpoint
+
+    head = (f"inhand-exp: stopped by {signal.Signals(signum).name}; {run_dir} keeps the log "
+            f"written so far")
+    if in_sweep:
+        return f"{head}. Run the sweep again to go on: it skips the jobs that finished."
+    if str(getattr(cfg.mode, "value", cfg.mode)) not in ("train", "train_eval"):
+        return f"{head} (inhand-analyze reads it). Run the command again to start over."
+    if cfg.train.store:
+        return (f"{head}. Run the command again: the training goes on from its last "
+                f"checkpoint in {cfg.train.store}.")
+    path = run_dir / "policy.pt"
+    try:
+        state = read_checkpoint(path, cfg.learner.name)
+    except (FileNotFoundError, CheckpointError):
+        return f"{head}; no policy was saved yet. Run the command again to start over."
+    frames, total = int(state["frames"]), int(cfg.train.frames)
+    saved = f"{path} holds iteration {state['iteration']} ({frames:,} frames)"
+    if cfg.checkpoint:  # trained on from another policy: train.frames more than it had
+        total += int(read_checkpoint(Path(cfg.checkpoint), cfg.learner.name)["frames"])
+        if frames < total:
+            return (f"{head}; {saved} of {total:,}. Train on from it with: inhand-exp "
+                    f"mode={cfg.mode} checkpoint={path} train.frames={total - frames}")
+    if frames >= total:  # the training finished; its evaluation was cut
+        return (f"{head}; {saved}, the whole training. Evaluate it with: inhand-exp "
+                f"mode=eval checkpoint={path}")
+    return f"{head}; {saved} of {total:,}. Continue with: inhand-exp resume={run_dir}"
+
+
 DONE = "done.json"  # written when a run finishes: a sweep run again skips it
 FAILED = "failed.txt"  # written when a job of a sweep fails, with its error
 REFUSED = 2  # the exit code of every refused input (bad config value, file, checkpoint)
@@ -221,6 +266,10 @@ def _app(cfg: DictConfig) -> None:
         if not cfg.get("resume"):
             _discard(run_dir)
         raise SystemExit(REFUSED) from None
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (``Interrupted``): stops a sweep too
+        signum = getattr(err, "signum", signal.SIGINT)
+        print(f"\n{interrupted_note(cfg, run_dir, signum, in_sweep)}", file=sys.stderr)
+        raise SystemExit(128 + signum) from None
     except Exception as err:  # noqa: BLE001 - a sweep outlives one job's error
         if not in_sweep:
             raise
@@ -233,6 +282,7 @@ def main() -> None:
     if not (CONF_DIR / "config.yaml").is_file():
         sys.exit(f"inhand-exp: config tree not found at {CONF_DIR}; "
                  "install from a source checkout with `pip install -e .`")
+    signal.signal(signal.SIGTERM, _raise_interrupted)
     try:
         sys.argv[1:] = resume_argv(sys.argv[1:])
     except (ConfigError, FileNotFoundError) as err:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import time
 import warnings
 
@@ -59,7 +60,16 @@ def _make_env(cfg: dict, goals: list[GoalPair] | None = None, states_hz: float =
 
 def _make_row(cfg: dict, goals: list[list[GoalPair]] | None, per: int,
               states_hz: float, once: bool = False,
-              env_class: type[EnvBase] = PrimitiveEnv) -> SerialEnv:
+              env_class: type[EnvBase] = PrimitiveEnv, owner: int | None = None) -> SerialEnv:
+    if owner is not None and os.getpid() != owner:
+        # In a worker process (TorchRL also builds a row in the main process, for its specs:
+        # that one keeps its signals). Ctrl-C reaches every process of the terminal's group,
+        # and a scheduler's SIGTERM every process of the job: the main process stops the run
+        # and closes its workers itself, so a worker leaves both to it instead of dying
+        # mid-step with a traceback of its own (one whose main process is gone ends as its
+        # pipe closes).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
     kwargs = [{"cfg": cfg, "states_hz": states_hz, "once": once, "env_class": env_class,
                "goals": None if goals is None else goals[j]} for j in range(per)]
     return SerialEnv(per, _make_env, create_env_kwargs=kwargs)
@@ -119,9 +129,10 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
     if goals is not None:
         dealt = split_goals(goals, workers * per)
         rows = [dealt[w * per:(w + 1) * per] for w in range(workers)]
-    kwargs = [{"cfg": plain, "goals": rows[w], "per": per, "states_hz": states_hz,
-               "once": once, "env_class": env_class} for w in range(workers)]
     backend = str(getattr(cfg.train.backend, "value", cfg.train.backend))
+    owner = None if backend == "serial" else os.getpid()
+    kwargs = [{"cfg": plain, "goals": rows[w], "per": per, "states_hz": states_hz,
+               "once": once, "env_class": env_class, "owner": owner} for w in range(workers)]
     if backend == "serial":
         env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)
     else:

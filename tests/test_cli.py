@@ -276,6 +276,12 @@ def test_resume_continues_an_interrupted_training_in_its_run_directory(tmp_path)
     assert not (run_dir / "run-3.mcap").exists()  # nothing written for it
 
 
+def _default_sigint() -> None:
+    """Ctrl-C's default in the child: a test run as a background job of a script inherits
+    SIGINT ignored, and Python would then leave it ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _stopped_by(sig: int, args: list[str], run_dir: Path, wait_for: Path, group: bool,
                 cwd: Path) -> subprocess.CompletedProcess[str]:
     """Run ``inhand-exp args`` with two environment workers, send ``sig`` once ``wait_for``
@@ -283,7 +289,7 @@ def _stopped_by(sig: int, args: list[str], run_dir: Path, wait_for: Path, group:
     env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
     proc = subprocess.Popen([*APP, *args, f"hydra.run.dir={run_dir}"], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_default_sigint)
     try:
         deadline = time.monotonic() + 240
         while not wait_for.exists() and proc.poll() is None and time.monotonic() < deadline:

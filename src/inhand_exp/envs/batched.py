@@ -14,8 +14,10 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import threading
 import time
 import warnings
+from contextlib import contextmanager
 
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
@@ -37,6 +39,15 @@ class SleepyParallelEnv(ParallelEnv):
 
     poll_s = 0.0005
 
+    def _start_workers(self) -> None:
+        # A Ctrl-C or SIGTERM while the workers are being spawned would leave a child reading
+        # its start-up data after the main process has let it go, printing a traceback of its
+        # own: the two signals wait until every worker has started (TorchRL waits for each),
+        # then stop the run as usual. (A Ctrl-C still reaches a child that is importing its
+        # modules then; it ignores the signal only from ``_make_row`` on.)
+        with signals_held(signal.SIGINT, signal.SIGTERM):
+            super()._start_workers()
+
     def _wait_for_workers(self, workers_range):
         flags = getattr(self, "_shm_done_flags", None)
         if self._use_buffers and flags is not None:
@@ -53,6 +64,35 @@ class SleepyParallelEnv(ParallelEnv):
         return super()._wait_for_workers(workers_range)
 
 
+class Row(SerialEnv):
+    """One worker's environments. TorchRL starts them at their first reset, and its worker
+    closes them when told to: a run stopped before that first reset (Ctrl-C right after the
+    workers came up) closes a row that never started, which TorchRL would refuse with an
+    error of the worker's own."""
+
+    def close(self, *, raise_if_closed: bool = True) -> None:
+        super().close(raise_if_closed=False)
+
+
+@contextmanager
+def signals_held(*signums: int):
+    """Run the block with ``signums`` noted instead of handled, then hand the first one that
+    came to its own handler. Python runs signal handlers in the main thread only: elsewhere
+    the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[int] = []
+    before = {s: signal.signal(s, lambda signum, frame: came.append(signum)) for s in signums}
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
+        if came:
+            signal.raise_signal(came[0])
+
+
 def _make_env(cfg: dict, goals: list[GoalPair] | None = None, states_hz: float = 0.0,
               once: bool = False, env_class: type[EnvBase] = PrimitiveEnv) -> EnvBase:
     return env_class(OmegaConf.create(cfg), goals=goals, states_hz=states_hz, once=once)
@@ -60,7 +100,7 @@ def _make_env(cfg: dict, goals: list[GoalPair] | None = None, states_hz: float =
 
 def _make_row(cfg: dict, goals: list[list[GoalPair]] | None, per: int,
               states_hz: float, once: bool = False,
-              env_class: type[EnvBase] = PrimitiveEnv, owner: int | None = None) -> SerialEnv:
+              env_class: type[EnvBase] = PrimitiveEnv, owner: int | None = None) -> Row:
     if owner is not None and os.getpid() != owner:
         # In a worker process (TorchRL also builds a row in the main process, for its specs:
         # that one keeps its signals). Ctrl-C reaches every process of the terminal's group,
@@ -72,7 +112,7 @@ def _make_row(cfg: dict, goals: list[list[GoalPair]] | None, per: int,
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
     kwargs = [{"cfg": cfg, "states_hz": states_hz, "once": once, "env_class": env_class,
                "goals": None if goals is None else goals[j]} for j in range(per)]
-    return SerialEnv(per, _make_env, create_env_kwargs=kwargs)
+    return Row(per, _make_env, create_env_kwargs=kwargs)
 
 
 def layout(cfg: DictConfig, num_envs: int | None = None) -> tuple[int, int]:

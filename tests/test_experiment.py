@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from inhand_exp.experiment import paper_row, table
+from inhand_exp.experiment import paper_row, policy_key, table
 
 SUMMARY = {"episodes": 500, "success_rate": 0.952, "drop_rate": 0.012, "timeout_rate": 0.036,
            "avg_time_s": 5.71}
@@ -27,3 +27,17 @@ def test_a_run_without_successes_shows_no_mean_time(compose_cfg):
     none = {**SUMMARY, "success_rate": 0.0, "avg_time_s": float("nan")}
     rows = table(none, compose_cfg("learner=ddpg", "goals=easy"), sampled=False).splitlines()
     assert rows[5].split() == ["avg", "time", "(s)", "-", "1.82"]
+
+
+def test_a_policys_store_key_ignores_what_only_the_test_set_uses(compose_cfg):
+    """A sweep's evaluations share one policy: the tested group, the hard set's flip share
+    and the perturbation leave its key as it is; the training budget or reward changes it."""
+    base = policy_key(compose_cfg("goals.train_groups=[easy,medium,hard]"))
+    for test_only in ("goals=hard", "goals.hard_flip_share=0", "goals.test_pairs=100",
+                      "perturb=heavier", "eval.episodes=7"):
+        assert policy_key(compose_cfg("goals.train_groups=[easy,medium,hard]",
+                                      test_only)) == base, test_only
+    for shaping in ("train.frames=2048", "task.reward_progress=0.1", "goals.seed=5",
+                    "goals.train_groups=[medium]"):
+        assert policy_key(compose_cfg("goals.train_groups=[easy,medium,hard]",
+                                      shaping)) != base, shaping

@@ -132,6 +132,10 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,
     return None
 
 
+# What shapes only the test set: a key added here keeps the policies already in a store.
+TEST_ONLY_GOAL_KEYS = ("name", "test_pairs", "hard_flip_share")
+
+
 def policy_key(cfg: DictConfig) -> str:
     """The name of this run's policy in ``train.store``: learner, object, noise and seed, and a
     digest of everything else that shapes the policy (the task, the training goals, the
@@ -140,7 +144,7 @@ def policy_key(cfg: DictConfig) -> str:
     c = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
     for key in ("perturb", "eval", "log", "mode", "checkpoint", "resume"):
         c.pop(key, None)
-    c["goals"] = {k: v for k, v in c["goals"].items() if k not in ("name", "test_pairs")}
+    c["goals"] = {k: v for k, v in c["goals"].items() if k not in TEST_ONLY_GOAL_KEYS}
     if not c["goals"]["train_groups"]:
         c["goals"]["train_groups"] = [cfg.goals.name]  # it trains on the tested group
     c["train"] = {k: c["train"][k] for k in ("frames", "num_envs")}

@@ -32,12 +32,13 @@ def test_a_run_without_successes_shows_no_mean_time(compose_cfg):
 def test_a_policys_store_key_ignores_what_only_the_test_set_uses(compose_cfg):
     """A sweep's evaluations share one policy: the tested group, the hard set's flip share
     and the perturbation leave its key as it is; the training budget or reward changes it."""
-    base = policy_key(compose_cfg("goals.train_groups=[easy,medium,hard]"))
+    def key(*overrides):
+        return policy_key(compose_cfg("goals.train_groups=[easy,medium,hard]", *overrides))
+
+    base = key()
     for test_only in ("goals=hard", "goals.hard_flip_share=0", "goals.test_pairs=100",
                       "perturb=heavier", "eval.episodes=7"):
-        assert policy_key(compose_cfg("goals.train_groups=[easy,medium,hard]",
-                                      test_only)) == base, test_only
+        assert key(test_only) == base, test_only
     for shaping in ("train.frames=2048", "task.reward_progress=0.1", "goals.seed=5",
                     "goals.train_groups=[medium]"):
-        assert policy_key(compose_cfg("goals.train_groups=[easy,medium,hard]",
-                                      shaping)) != base, shaping
+        assert key(shaping) != base, shaping

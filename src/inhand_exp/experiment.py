@@ -132,7 +132,8 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,
     return None
 
 
-# What shapes only the test set: a key added here keeps the policies already in a store.
+# Goal settings that shape only the test set. They stay out of a policy's store key, so that
+# setting them (or adding such a setting) does not orphan the policies already stored.
 TEST_ONLY_GOAL_KEYS = ("name", "test_pairs", "hard_flip_share")
 
 

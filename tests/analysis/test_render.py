@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -113,3 +114,49 @@ def test_the_log_draws_its_episodes_on_a_foxglove_scene(eval_log):
     names = {summary.schemas[c.schema_id].name for c in summary.channels.values()
              if c.topic == "/scene"}
     assert names == {"foxglove.SceneUpdate"}  # what Foxglove's 3D panel looks for
+
+
+def test_a_blitted_frame_is_the_figure_drawn_whole():
+    """Only the moving artists are drawn per frame, over the background drawn once: no trace
+    of the frame before remains, so each frame equals a full draw of the same state."""
+    import matplotlib.pyplot as plt
+
+    from inhand_exp.analysis.render import blitted
+
+    fig, ax = plt.subplots(figsize=(2, 2))
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    (line,) = ax.plot([], [], lw=3)
+    title = ax.set_title("")
+
+    def draw(k):
+        line.set_data([0.1 * k, 0.5], [0.2, 0.1 * k])
+        title.set_text(f"frame {k}")
+        return [line, title]
+
+    frames = list(blitted(fig, [line, title], draw, 4))
+    assert not (frames[0] == frames[3]).all()
+    line.set_animated(False)
+    title.set_animated(False)
+    draw(3)
+    fig.canvas.draw()
+    np.testing.assert_array_equal(frames[3], np.asarray(fig.canvas.buffer_rgba()))
+    plt.close(fig)
+
+
+def test_an_mp4_gets_every_frame_through_ffmpeg(eval_log, tmp_path, monkeypatch):
+    """ffmpeg reads the frames as raw RGBA of the figure's size (a stand-in ffmpeg on the PATH
+    keeps what it was given)."""
+    fake = tmp_path / "bin" / "ffmpeg"
+    fake.parent.mkdir()
+    fake.write_text('#!/bin/bash\necho "$@" > "$(dirname "$0")/args"\ncat > "${@: -1}"\n')
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake.parent}:{os.environ['PATH']}")
+    out = render(eval_log, episode=1, out=tmp_path / "ep.mp4", max_frames=6)
+    args = (fake.parent / "args").read_text().split()
+    w, h = map(int, args[args.index("-s") + 1].split("x"))
+    assert args[args.index("-pix_fmt") + 1] == "rgba" and w > 100 and h > 100
+    assert out.stat().st_size == 6 * w * h * 4
+    fake.write_text("#!/bin/sh\necho 'Unknown encoder libx264' >&2\nexit 1\n")
+    with pytest.raises(RenderError, match="ffmpeg failed writing .*Unknown encoder libx264"):
+        render(eval_log, episode=1, out=tmp_path / "ep.mp4", max_frames=6)

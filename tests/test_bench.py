@@ -175,8 +175,9 @@ def test_the_flip_count_uses_the_configured_primitives():
 def test_reach_splits_the_cube_goals_by_posture(capsys):
     """The cube study's start; the goals its posture holds and the others, each with how many
     the search reaches."""
-    main(["reach", "--object", "cube", "--pairs", "4", "goals=hard",
-          "goals.hard_goal_posture=any", "goals.x0=[0.0,0.25,0.0]"])
+    main(["reach", "--object", "cube", "--pairs", "4", "--resolution-m", "0.04",
+          "--resolution-rad", "0.2", "goals=hard", "goals.hard_goal_posture=any",
+          "goals.x0=[0.0,0.25,0.0]"])  # a lattice four times coarser than the default's
     out = last_json(capsys)
     assert sum(out["goals"].values()) == out["pairs"] == 4
     for k, n in out["goals"].items():
@@ -185,6 +186,9 @@ def test_reach_splits_the_cube_goals_by_posture(capsys):
     assert lo < 0.0 < hi and out["three_finger_states"] <= out["states"]
     with pytest.raises(SystemExit, match="set goals.x0"):
         main(["reach", "--object", "cube"])
+    with pytest.raises(SystemExit):
+        main(["reach", "--object", "cube", "--resolution-rad", "0"])
+    assert "--resolution-rad must be > 0" in capsys.readouterr().err
 
 
 def test_fingerprint_repeats_and_tells_a_changed_run_apart(capsys, tmp_path):

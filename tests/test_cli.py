@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -143,7 +144,7 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
     (tmp_path / "text.pt").write_text("not a checkpoint\n")
     goals = bad_goal_files(tmp_path)
     ev = ["mode=eval", f"checkpoint={policy}"]
-    for k, (args, message) in enumerate([
+    cases = [
         (["mode=eval"], "mode=eval needs checkpoint=PATH"),
         (["mode=eval", f"checkpoint={tmp_path / 'missing.pt'}"], "not found"),
         (["mode=eval", f"checkpoint={tmp_path / 'text.pt'}"], "not a policy.pt"),
@@ -157,13 +158,19 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
         (["object=schema"], "object=schema is the typed schema"),
         (["sim.timestep_s=-1"], "sim.timestep_s must be > 0"),
         (["no_such_key=1"], "Could not override 'no_such_key'"),
-    ]):
-        run_dir = tmp_path / f"bad{k}"
-        bad = inhand_exp(*args, f"hydra.run.dir={run_dir}", cwd=tmp_path,
-                         fast="learner=ddpg" not in args)  # the fast budget is PPO's
+    ]
+
+    def refused(k: int) -> subprocess.CompletedProcess[str]:
+        args = cases[k][0]
+        return inhand_exp(*args, f"hydra.run.dir={tmp_path / f'bad{k}'}", cwd=tmp_path,
+                          fast="learner=ddpg" not in args)  # the fast budget is PPO's
+
+    with ThreadPoolExecutor(3) as pool:  # each refusal is a process of its own
+        results = list(pool.map(refused, range(len(cases))))
+    for k, ((args, message), bad) in enumerate(zip(cases, results, strict=True)):
         assert bad.returncode == 2 and message in bad.stderr, (args, bad.stderr)
         assert "Traceback" not in bad.stderr
-        assert not run_dir.exists(), args  # a refused run writes nothing
+        assert not (tmp_path / f"bad{k}").exists(), args  # a refused run writes nothing
 
 
 def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path):
@@ -332,6 +339,35 @@ def test_an_interrupted_training_stops_cleanly_and_says_how_to_go_on(tmp_path):
     assert not second.truncated
     later = [m["iteration"] for m in second.topic("/train/iteration")]
     assert all(i > done[-1] for i in later)
+
+
+def test_an_error_raised_while_an_interrupt_unwinds_is_the_interrupt():
+    """A SIGTERM that lands inside OmegaConf building a worker's config left the config
+    half-built, and OmegaConf's next error (a ConfigKeyError, raised from an AttributeError
+    while the interrupt unwound) used to end the run with a traceback instead of the clean
+    stop. The app looks behind such an error for the interrupt."""
+    from omegaconf.errors import ConfigKeyError
+
+    from inhand_exp.cli import Interrupted, interrupt_behind
+
+    try:
+        try:
+            raise Interrupted(signal.SIGTERM)
+        except KeyboardInterrupt:
+            try:
+                raise AttributeError("'NoneType' object has no attribute '_invalidate_flags'")
+            except AttributeError as inner:
+                raise ConfigKeyError("half-built") from inner
+    except ConfigKeyError as err:
+        stop = interrupt_behind(err)
+    assert isinstance(stop, Interrupted) and stop.signum == signal.SIGTERM
+    try:
+        try:
+            raise ValueError("a real failure")
+        except ValueError as inner:
+            raise RuntimeError("reported") from inner
+    except RuntimeError as err:
+        assert interrupt_behind(err) is None
 
 
 def test_resume_refuses_what_it_cannot_resume(tmp_path):

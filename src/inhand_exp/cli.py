@@ -20,9 +20,8 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError, register_configs, validate
-from inhand_exp.learn.checkpoint import CheckpointError
+from inhand_exp.errors import CheckpointError, GoalsError
 from inhand_exp.runinfo import CONF_DIR
-from inhand_exp.task.goals import GoalsError
 
 register_configs()
 
@@ -38,18 +37,19 @@ def fresh_log_path(run_dir: Path, name: str) -> Path:
 
 def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
     """Validate ``cfg``, open the run log in ``run_dir`` and do what ``cfg.mode`` asks."""
+    validate(cfg)
+    for what, name in (("checkpoint", cfg.checkpoint), ("goal file", cfg.eval.goals_file)):
+        if name and not Path(name).is_file():  # before anything is written
+            raise FileNotFoundError(f"{what} {name} not found")
+    # torch, TorchRL and PyBullet only now: the refusals above answer within a second
+    from inhand_exp.experiment import prepare, run_job
     from inhand_exp.learn.registry import LEARNERS
     from inhand_exp.record import RunLog
     from inhand_exp.runinfo import run_config_message
 
-    validate(cfg)
     if cfg.learner.name not in LEARNERS:
         raise ConfigError(f"learner={cfg.learner.name} is not built yet; known learners: "
                           f"{', '.join(sorted(LEARNERS))}")
-    for what, name in (("checkpoint", cfg.checkpoint), ("goal file", cfg.eval.goals_file)):
-        if name and not Path(name).is_file():  # before anything is written
-            raise FileNotFoundError(f"{what} {name} not found")
-    from inhand_exp.experiment import prepare, run_job
 
     done = run_dir / DONE
     if done.is_file() and not cfg.resume:
@@ -139,6 +139,25 @@ class Interrupted(KeyboardInterrupt):
 
 def _raise_interrupted(signum: int, frame) -> None:
     raise Interrupted(signum)
+
+
+def interrupt_behind(err: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM that ``err`` was raised while handling, if any: a signal that lands
+    inside a library's code (OmegaConf building a config, say) can leave it half-done, and the
+    error the library raises next is the interrupt's doing, not a failure of the run."""
+    seen: set[int] = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return err
+        seen.add(id(err))
+        err = err.__context__ or err.__cause__
+    return None
+
+
+def _stopped(err: KeyboardInterrupt, cfg: DictConfig, run_dir: Path, in_sweep: bool) -> None:
+    signum = getattr(err, "signum", signal.SIGINT)
+    print(f"\n{interrupted_note(cfg, run_dir, signum, in_sweep)}", file=sys.stderr)
+    raise SystemExit(128 + signum) from None
 
 
 def interrupted_note(cfg: DictConfig, run_dir: Path, signum: int, in_sweep: bool) -> str:
@@ -259,6 +278,8 @@ def _app(cfg: DictConfig) -> None:
         check_choices(hc.runtime.choices)
         log_path = run(cfg, run_dir, list(hc.overrides.task))
     except (ConfigError, CheckpointError, GoalsError, FileNotFoundError) as err:
+        if (stop := interrupt_behind(err)) is not None:
+            _stopped(stop, cfg, run_dir, in_sweep)
         if in_sweep:
             _fail_job(run_dir, err, refused=True)
             return
@@ -267,10 +288,10 @@ def _app(cfg: DictConfig) -> None:
             _discard(run_dir)
         raise SystemExit(REFUSED) from None
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (``Interrupted``): stops a sweep too
-        signum = getattr(err, "signum", signal.SIGINT)
-        print(f"\n{interrupted_note(cfg, run_dir, signum, in_sweep)}", file=sys.stderr)
-        raise SystemExit(128 + signum) from None
+        _stopped(err, cfg, run_dir, in_sweep)
     except Exception as err:  # noqa: BLE001 - a sweep outlives one job's error
+        if (stop := interrupt_behind(err)) is not None:
+            _stopped(stop, cfg, run_dir, in_sweep)
         if not in_sweep:
             raise
         _fail_job(run_dir, err, refused=False)

@@ -22,6 +22,13 @@ TINY = ("learner=search", "task.workspace_x_m=[-0.02,0.02]", "task.workspace_z_m
         "task.workspace_theta_rad=[-0.2,0.2]")
 
 
+@pytest.fixture(scope="module")
+def tiny_graph_dir(tmp_path_factory):
+    """One graph cache for the tests that read the TINY graph: the first of them builds it (8 s),
+    the others load it. The tests of building and caching use their own directories."""
+    return tmp_path_factory.mktemp("tiny-graph")
+
+
 def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
     """A hand-built graph over 6 nodes: 0-1 (1 s), 1-2 (1 s), 0-2 (5 s), 2-3 (2 s) both ways;
     one way only 5->0 (1 s) and 3->4 (1 s)."""
@@ -49,10 +56,10 @@ def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
     assert np.isinf(g.distances_to(goal, spent={3})).all()
 
 
-def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_path):
+def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tiny_graph_dir):
     """When the filter refuses the action of the best edge, the walk takes the best edge of
     the graph without it, and never plans through it again in that episode."""
-    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}"))
     g, policy = search.ensure_graph(), search.policy
     lat = g.lattice
     goal = np.array([lat.xs[0], lat.zs[0], lat.ts[0]])
@@ -90,10 +97,10 @@ def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tmp_pa
         value(cell, a, again) for a in policy.actions if a.index != best.index)
 
 
-def test_a_goal_node_the_walk_comes_back_to_no_closer_is_spent(compose_cfg, tmp_path):
+def test_a_goal_node_the_walk_comes_back_to_no_closer_is_spent(compose_cfg, tiny_graph_dir):
     """At a node of the goal cell whose last reposes the filter refuses, the walk that comes
     back there no closer to the goal plans on to the goal cell's other nodes."""
-    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}"))
     g, policy = search.ensure_graph(), search.policy
     lat = g.lattice
     for cell in (tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0):
@@ -224,14 +231,14 @@ def test_search_plays_easy_pairs_to_the_goal(compose_cfg, tmp_path):
     assert summary["success_rate"] >= 0.75, summary
 
 
-def test_flip_edges_move_finger_0_or_2_over_a_pair_that_holds_alone(compose_cfg, tmp_path):
+def test_flip_edges_move_finger_0_or_2_over_a_pair_that_holds_alone(compose_cfg, tiny_graph_dir):
     """A flip edge leaves its pose and the staying pair's contacts as they are, and the pair
     holds the object alone there, as the flip's own check (``flip.pair_holds``, on the
     fingertips the kinematics put there) finds; opposed pairs that cannot hold get no edge."""
     from inhand_exp.control.execute import Observation
     from inhand_exp.control.flip import pair_holds
 
-    cfg = compose_cfg(*TINY, f"learner.cache_dir={tmp_path}")
+    cfg = compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}")
     search = Search(cfg)
     g = search.ensure_graph()
     model, lat = search.model, g.lattice
@@ -314,12 +321,12 @@ def test_slide_edges_follow_the_slides_own_force_check(compose_cfg):
     assert verdicts[True] >= 20 and verdicts[False] >= 20, verdicts
 
 
-def test_an_upright_poles_lone_finger_has_no_slide_edge_down(compose_cfg, tmp_path):
+def test_an_upright_poles_lone_finger_has_no_slide_edge_down(compose_cfg, tiny_graph_dir):
     """Within 0.2 rad of upright, slides of the lone finger go up the pole only; the others
     go both ways."""
     from inhand_exp.control.sample import lone_finger
 
-    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}"))
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}"))
     g = search.ensure_graph()
     cells = {int(n): tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0}
     coo = g.matrix.tocoo()

@@ -9,7 +9,8 @@
     inhand-bench load [--minutes M] [--workers W] [overrides...]
     inhand-bench torques [--trials N] [--actions N] [--seed S] [overrides...]
     inhand-bench goals [--pairs N] [--seed S] [overrides...]
-    inhand-bench reach --object cube [--pairs N] [--run EVAL_DIR] [--opposite-only] [overrides...]
+    inhand-bench reach --object cube [--pairs N] [--run EVAL_DIR] [--opposite-only]
+                       [--resolution-m M] [--resolution-rad R] [overrides...]
     inhand-bench fingerprint [--actions N] [--seed S] [--out RUN.npz] [--against RUN.npz]
                              [overrides...]
 
@@ -207,6 +208,10 @@ def main(argv: list[str] | None = None) -> None:
                         help="reach: evaluation logs of the same goals, split by reach")
     parser.add_argument("--opposite-only", action="store_true",
                         help="reach: only two fingers on opposite faces carry the cube")
+    parser.add_argument("--resolution-m", type=float, default=0.02,
+                        help="reach: the lattice's height step (m)")
+    parser.add_argument("--resolution-rad", type=float, default=0.1,
+                        help="reach: the lattice's angle step (rad)")
     parser.add_argument("--out", type=Path, default=None,
                         help="fingerprint: keep this run's masks, outcomes and poses (.npz)")
     parser.add_argument("--against", type=Path, default=None,
@@ -222,6 +227,8 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"--pairs must be > 0, got {args.pairs}")
     if args.actions <= 0:
         parser.error(f"--actions must be > 0, got {args.actions}")
+    if not (args.resolution_m > 0 and args.resolution_rad > 0):
+        parser.error("--resolution-m and --resolution-rad must be > 0")
     learner = {"graph": ["learner=search", "mode=eval"],
                "torques": ["learner=ddpg", "mode=train"]}.get(args.what, [])
     try:
@@ -255,8 +262,8 @@ def main(argv: list[str] | None = None) -> None:
         from inhand_exp.bench.reach import goal_reach
 
         try:
-            result = goal_reach(cfg, args.pairs, run=args.run,
-                                opposite_only=args.opposite_only)
+            result = goal_reach(cfg, args.pairs, args.resolution_m, args.resolution_rad,
+                                run=args.run, opposite_only=args.opposite_only)
         except ConfigError as err:
             sys.exit(f"inhand-bench: {err}")
     elif args.what == "fingerprint":

@@ -9,12 +9,10 @@ from pathlib import Path
 
 import torch
 
+from inhand_exp.errors import CheckpointError
+
 REQUIRED = ("learner", "iteration", "frames")
 TRAINED_WITH = "trained_with"  # the overrides of the training run(s) that made the policy
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be read, or does not fit this configuration."""
 
 
 def save_checkpoint(state: dict, path: Path) -> None:

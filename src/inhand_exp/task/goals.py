@@ -61,6 +61,7 @@ from inhand_exp.control.sample import (
     postures,
     random_grasp,
 )
+from inhand_exp.errors import GoalsError
 
 GROUPS = ("easy", "medium", "hard")
 TRAIN_GROUPS = (*GROUPS, "flip")  # flip: a hard pair that needs a flip (training only)
@@ -72,10 +73,6 @@ EASY_STEP = np.array([0.06, 0.06, 0.6])  # largest easy offset (m, m, rad)
 HARD_POSTURES = ("other", "any")
 FLIP_FINGERS = (0, 2)  # the action table's flip left and flip right
 LONE_SLACK_M = 0.005  # the grid of ``face_coords``: a lone finger "as high" within one step
-
-
-class GoalsError(ValueError):
-    """A goal file that cannot be used, with the row and column at fault."""
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,13 @@
+"""The refusals the ``inhand-exp`` app reports as one line each (exit code 2), defined apart from
+the modules that raise them so that the app can catch them without importing torch or pandas:
+a typo, ``--help`` or a refused config answers in well under a second of imports."""
+
+from __future__ import annotations
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be read, or does not fit this configuration."""
+
+
+class GoalsError(ValueError):
+    """A goal file that cannot be used, with the row and column at fault."""

@@ -133,10 +133,17 @@ def bad_goal_files(tmp_path: Path) -> dict[str, Path]:
     return paths
 
 
-def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path):
-    first = inhand_exp("mode=train", f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
+@pytest.fixture(scope="module")
+def tiny_policy(tmp_path_factory) -> Path:
+    """A policy.pt trained with the tiny budget, for the tests that only evaluate one."""
+    tmp = tmp_path_factory.mktemp("tiny-policy")
+    first = inhand_exp("mode=train", f"hydra.run.dir={tmp / 'train'}", cwd=tmp)
     assert first.returncode == 0, first.stderr
-    policy = tmp_path / "train" / "policy.pt"
+    return tmp / "train" / "policy.pt"
+
+
+def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path, tiny_policy):
+    policy = tiny_policy
     res = inhand_exp("mode=eval", f"checkpoint={policy}", f"hydra.run.dir={tmp_path / 'ev'}",
                      cwd=tmp_path)
     assert res.returncode == 0, res.stderr
@@ -202,7 +209,7 @@ def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path)
     assert "task.reward_progress=0.1" in variants["ev"]
 
 
-def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
+def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path, tiny_policy):
     from inhand_exp.config import HandConfig, ObjectConfig
     from inhand_exp.control.hand import HandModel
     from inhand_exp.task.goals import goal_set
@@ -221,11 +228,8 @@ def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path):
     for a, b in zip(back, made, strict=True):
         np.testing.assert_allclose(np.r_[a.x0, a.xg, a.contacts.coords],
                                    np.r_[b.x0, b.xg, b.contacts.coords], atol=1e-8)
-    first = inhand_exp("mode=train", f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
-    assert first.returncode == 0, first.stderr
-    ev = inhand_exp("mode=eval", f"checkpoint={tmp_path / 'train' / 'policy.pt'}",
-                    f"eval.goals_file={path}", f"hydra.run.dir={tmp_path / 'ev'}",
-                    "eval.episodes=6", cwd=tmp_path)
+    ev = inhand_exp("mode=eval", f"checkpoint={tiny_policy}", f"eval.goals_file={path}",
+                    f"hydra.run.dir={tmp_path / 'ev'}", "eval.episodes=6", cwd=tmp_path)
     assert ev.returncode == 0, ev.stderr
     episodes = read_log(tmp_path / "ev" / "run.mcap").topic("/eval/episode")
     assert [e["xg"] for e in episodes] == [list(p.xg) for p in back]
@@ -247,13 +251,12 @@ def test_a_fixed_start_pose_starts_every_pair_and_an_unholdable_one_is_refused(t
     assert not (tmp_path / "bad").exists()
 
 
-def test_a_goal_file_whose_grasps_do_not_fit_the_perturbed_object_is_refused(tmp_path):
+def test_a_goal_file_whose_grasps_do_not_fit_the_perturbed_object_is_refused(tmp_path,
+                                                                            tiny_policy):
     res = inhand_exp("mode=goals", "goals=medium", "eval.episodes=16",
                      f"hydra.run.dir={tmp_path / 'set'}", cwd=tmp_path, fast=False)
     assert res.returncode == 0, res.stderr
-    first = inhand_exp("mode=train", f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
-    assert first.returncode == 0, first.stderr
-    ev = inhand_exp("mode=eval", f"checkpoint={tmp_path / 'train' / 'policy.pt'}",
+    ev = inhand_exp("mode=eval", f"checkpoint={tiny_policy}",
                     f"eval.goals_file={tmp_path / 'set' / 'goals.csv'}", "perturb=longer",
                     f"hydra.run.dir={tmp_path / 'ev'}", cwd=tmp_path)
     assert ev.returncode == 2
@@ -487,12 +490,18 @@ def test_resuming_from_one_checkpoint_twice_gives_identical_training(tmp_path):
     first = inhand_exp("mode=train", "train.frames=16", f"hydra.run.dir={base}", *FAST[1:],
                        cwd=tmp_path, fast=False)
     assert first.returncode == 0, first.stderr
-    states, logs = [], []
     for name in ("a", "b"):
         shutil.copytree(base, tmp_path / name)
-        res = inhand_exp(f"resume={tmp_path / name}", "train.frames=32", cwd=tmp_path,
-                         fast=False)
-        assert res.returncode == 0, res.stderr
+    # both copies resumed, and a run that never stopped, side by side (processes of their own)
+    straight = tmp_path / "straight"
+    runs = [[f"resume={tmp_path / 'a'}", "train.frames=32"],
+            [f"resume={tmp_path / 'b'}", "train.frames=32"],
+            ["mode=train", "train.frames=32", f"hydra.run.dir={straight}", *FAST[1:]]]
+    with ThreadPoolExecutor(3) as pool:
+        for res in pool.map(lambda args: inhand_exp(*args, cwd=tmp_path, fast=False), runs):
+            assert res.returncode == 0, res.stderr
+    states, logs = [], []
+    for name in ("a", "b"):
         log = read_log(tmp_path / name / "run-2.mcap").topic("/train/iteration")
         logs.append([(m["iteration"], m["frames"], m["losses"], m["mean_return"]) for m in log])
         states.append(torch.load(tmp_path / name / "policy.pt", weights_only=True))
@@ -502,11 +511,6 @@ def test_resuming_from_one_checkpoint_twice_gives_identical_training(tmp_path):
             assert torch.equal(v, states[1][key][k]), (key, k)
     # the bound on the difference from a run that never stopped: everything before the cut
     # is identical; only the iterations after it differ
-    straight = tmp_path / "straight"
-    res = inhand_exp("mode=train", "train.frames=32", f"hydra.run.dir={straight}", *FAST[1:],
-                     cwd=tmp_path, fast=False)
-    assert res.returncode == 0, res.stderr
-
     def iterations(path):
         return [(m["iteration"], m["frames"], m["losses"], m["mean_return"])
                 for m in read_log(path).topic("/train/iteration")]

@@ -41,16 +41,6 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
     for what, name in (("checkpoint", cfg.checkpoint), ("goal file", cfg.eval.goals_file)):
         if name and not Path(name).is_file():  # before anything is written
             raise FileNotFoundError(f"{what} {name} not found")
-    # torch, TorchRL and PyBullet only now: the refusals above answer within a second
-    from inhand_exp.experiment import prepare, run_job
-    from inhand_exp.learn.registry import LEARNERS
-    from inhand_exp.record import RunLog
-    from inhand_exp.runinfo import run_config_message
-
-    if cfg.learner.name not in LEARNERS:
-        raise ConfigError(f"learner={cfg.learner.name} is not built yet; known learners: "
-                          f"{', '.join(sorted(LEARNERS))}")
-
     done = run_dir / DONE
     if done.is_file() and not cfg.resume:
         earlier = _done_overrides(done)
@@ -60,6 +50,16 @@ def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
                               f"directory (hydra.run.dir, hydra.sweep.dir) or remove that one")
         print(f"{run_dir}: finished earlier ({done}); skipped")
         return run_dir / cfg.log.file
+    # torch, TorchRL and PyBullet only now: the refusals and skips above answer within a second
+    from inhand_exp.experiment import prepare, run_job
+    from inhand_exp.learn.registry import LEARNERS
+    from inhand_exp.record import RunLog
+    from inhand_exp.runinfo import run_config_message
+
+    if cfg.learner.name not in LEARNERS:
+        raise ConfigError(f"learner={cfg.learner.name} is not built yet; known learners: "
+                          f"{', '.join(sorted(LEARNERS))}")
+
     # every input read and checked: a refusal writes nothing
     job = prepare(cfg, run_dir, overrides)
     log_path = run_dir / cfg.log.file

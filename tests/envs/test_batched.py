@@ -100,3 +100,37 @@ def test_parallel_main_process_sleeps_while_the_workers_step(compose_cfg):
     finally:
         env.close()
     assert cpu < 0.3 * wall, (cpu, wall)  # spinning: about 0.7 here
+
+
+def test_an_interrupt_while_the_batch_is_built_waits_until_it_is_built(compose_cfg,
+                                                                         monkeypatch):
+    """A SIGTERM that comes while the environments are being made (here: as each row starts)
+    is raised once the batch stands, and the batch is closed: it never lands half-way through
+    OmegaConf or PyBullet building an environment."""
+    import signal
+
+    from inhand_exp.envs import batched
+
+    made, closed = [], []
+    make_row = batched._make_row
+
+    def row_after_a_sigterm(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        made.append(make_row(*args, **kwargs))
+        return made[-1]
+
+    def interrupted(signum, frame):
+        raise KeyboardInterrupt(signum)
+
+    close = batched.SerialEnv.close
+    monkeypatch.setattr(batched, "_make_row", row_after_a_sigterm)
+    monkeypatch.setattr(batched.SerialEnv, "close",
+                        lambda self, **kw: (closed.append(self), close(self, **kw))[1])
+    before = signal.signal(signal.SIGTERM, interrupted)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            batched_env(compose_cfg(*SMALL, "train.backend=serial", "train.workers=2"), 0)
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert len(made) >= 2  # every row was made: the signal waited
+    assert any(type(env) is batched.SerialEnv for env in closed)  # the batch, closed

@@ -342,18 +342,18 @@ def test_an_upright_poles_lone_finger_has_no_slide_edge_down(compose_cfg, tiny_g
     assert min(ways[True, True], ways[False, True], ways[False, False]) > 0, ways
 
 
-def test_the_graph_holds_only_grasps_the_primitives_may_move(compose_cfg, tmp_path):
+def test_the_graph_holds_only_grasps_the_primitives_may_move(compose_cfg, tiny_graph_dir):
     """A node's contacts have the slack a repose asks of the grasp it moves
     (``primitives.min_grasp_margin``): asking for more slack leaves fewer nodes, all firm."""
     from inhand_exp.config import PrimitivesConfig, typed
     from inhand_exp.control.repose import strict_hold
 
     def graph(margin: float) -> tuple[Search, PoseGraph]:
-        search = Search(compose_cfg(*TINY, f"learner.cache_dir={tmp_path}",
+        search = Search(compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}",
                                     f"primitives.min_grasp_margin={margin}"))
         return search, search.ensure_graph()
 
-    _, loose = graph(0.0)
+    _, loose = graph(0.02)  # the default: the TINY graph the other tests read
     search, firm = graph(0.1)
     assert 0 < firm.matrix.shape[0] < loose.matrix.shape[0]
     prim = typed(search.cfg.primitives, PrimitivesConfig)

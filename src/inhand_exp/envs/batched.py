@@ -173,11 +173,22 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
     owner = None if backend == "serial" else os.getpid()
     kwargs = [{"cfg": plain, "goals": rows[w], "per": per, "states_hz": states_hz,
                "once": once, "env_class": env_class, "owner": owner} for w in range(workers)]
-    if backend == "serial":
-        env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)
-    else:
-        plain_start_method()
-        env = SleepyParallelEnv(workers, _make_row, create_env_kwargs=kwargs,
-                                mp_start_method="spawn")
-    env.set_seed(seed)
+    # A Ctrl-C or SIGTERM while the batch is built (TorchRL builds one environment in this
+    # process to read its specs, then starts the workers at set_seed) waits until it is built,
+    # then stops the run with the batch closed: landing inside OmegaConf or PyBullet half-way,
+    # it used to leave their objects half-built and end the run with their error instead.
+    env = None
+    try:
+        with signals_held(signal.SIGINT, signal.SIGTERM):
+            if backend == "serial":
+                env = SerialEnv(workers, _make_row, create_env_kwargs=kwargs)
+            else:
+                plain_start_method()
+                env = SleepyParallelEnv(workers, _make_row, create_env_kwargs=kwargs,
+                                        mp_start_method="spawn")
+            env.set_seed(seed)
+    except KeyboardInterrupt:
+        if env is not None and not env.is_closed:
+            env.close()
+        raise
     return env

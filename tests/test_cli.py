@@ -192,13 +192,15 @@ def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path)
     moved = tmp_path / "elsewhere" / "actor.pt"  # no .hydra beside it
     moved.parent.mkdir()
     moved.write_bytes((tmp_path / "train" / "policy.pt").read_bytes())
-    ev = inhand_exp("mode=eval", f"checkpoint={moved}", f"hydra.run.dir={tmp_path / 'ev'}",
-                    cwd=tmp_path)
+    # an evaluation of the moved file and a training that goes on from it, side by side
+    with ThreadPoolExecutor(2) as pool:
+        ev, more = pool.map(lambda args: inhand_exp(*args, cwd=tmp_path), [
+            ["mode=eval", f"checkpoint={moved}", f"hydra.run.dir={tmp_path / 'ev'}"],
+            ["mode=train", f"checkpoint={moved}", "task.reward_progress=0.2",
+             f"hydra.run.dir={tmp_path / 'more'}"]])
     assert ev.returncode == 0, ev.stderr
     assert run_config(tmp_path / "ev" / "run.mcap")["policy_overrides"] == \
         trained["policy_overrides"]
-    more = inhand_exp("mode=train", f"checkpoint={moved}", "task.reward_progress=0.2",
-                      f"hydra.run.dir={tmp_path / 'more'}", cwd=tmp_path)
     assert more.returncode == 0, more.stderr
     longer = run_config(tmp_path / "more" / "run.mcap")["policy_overrides"]
     assert "task.reward_progress=0.2" in longer and "task.reward_progress=0.1" not in longer

@@ -1,6 +1,6 @@
 """The refusals the ``inhand-exp`` app reports as one line each (exit code 2), defined apart from
 the modules that raise them so that the app can catch them without importing torch or pandas:
-a typo, ``--help`` or a refused config answers in well under a second of imports."""
+a typo or a refused config is answered within about a second."""
 
 from __future__ import annotations
 

@@ -11,11 +11,14 @@ episode's outcome. GIF needs nothing more (Pillow); MP4 needs ``ffmpeg`` on the 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import itertools
 import logging
 import math
 import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -145,24 +148,26 @@ def render(path: Path, episode: int | None = None, out: Path | None = None,
 
     stills = set(np.linspace(0, len(frames) - 1, snapshots).round().astype(int).tolist()
                  if snapshots else [])
-    images = []
-    for k, rgba in enumerate(blitted(fig, [body, *links, *tips, forces, title], draw,
-                                     len(frames))):
-        if k in stills:
-            Image.fromarray(rgba).save(
-                out.with_name(f"{out.stem}-t{frames[k]['sim_time_s']:06.2f}s.png"))
-        if suffix == ".gif":  # GIF's palette image, made now: a quarter of the memory, and
-            # the fast octree (4 ms a frame) rather than Pillow's default median cut (22 ms)
-            images.append(Image.fromarray(rgba[..., :3]).quantize(
-                256, method=Image.Quantize.FASTOCTREE))
+
+    def with_stills() -> Iterator[np.ndarray]:
+        for k, rgba in enumerate(blitted(fig, [body, *links, *tips, forces, title], draw,
+                                         len(frames))):
+            if k in stills:
+                Image.fromarray(rgba).save(
+                    out.with_name(f"{out.stem}-t{frames[k]['sim_time_s']:06.2f}s.png"))
+            yield rgba
+
+    try:
+        if suffix == ".gif":  # palette images made frame by frame: a quarter of the memory,
+            # by the fast octree (4 ms a frame) rather than Pillow's default median cut (22 ms)
+            images = [Image.fromarray(rgba[..., :3]).quantize(
+                256, method=Image.Quantize.FASTOCTREE) for rgba in with_stills()]
+            images[0].save(out, save_all=True, append_images=images[1:], loop=0,
+                           duration=round(1000 / fps))
         else:
-            images.append(rgba)
-    plt.close(fig)
-    if suffix == ".gif":
-        images[0].save(out, save_all=True, append_images=images[1:], loop=0,
-                       duration=round(1000 / fps))
-    else:
-        mp4(images, out, fps)
+            mp4(with_stills(), out, fps)
+    finally:
+        plt.close(fig)
     return out
 
 
@@ -183,19 +188,30 @@ def blitted(fig, moving: list, draw, n: int) -> Iterator[np.ndarray]:
         yield np.asarray(canvas.buffer_rgba()).copy()
 
 
-def mp4(frames: list[np.ndarray], out: Path, fps: float) -> None:
-    """Pipe the RGBA frames to ``ffmpeg`` as raw video (H.264, yuv420p: plays everywhere)."""
-    h, w = frames[0].shape[:2]
+def mp4(frames: Iterator[np.ndarray], out: Path, fps: float) -> None:
+    """Stream the RGBA frames to ``ffmpeg`` as raw video, one at a time (H.264, yuv420p:
+    plays everywhere)."""
+    first = next(frames)
+    h, w = first.shape[:2]
     cmd = ["ffmpeg", "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgba",
            "-s", f"{w}x{h}", "-r", f"{fps:g}", "-i", "-", "-vf",
            "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-vcodec", "libx264", "-pix_fmt", "yuv420p",
            str(out)]
-    proc = subprocess.run(cmd, input=b"".join(f.tobytes() for f in frames),
-                          capture_output=True)
-    if proc.returncode != 0:
-        raise RenderError(f"ffmpeg failed writing {out}: "
-                          f"{proc.stderr.decode(errors='replace').strip()}")
-
+    with tempfile.TemporaryFile() as said:  # a file: ffmpeg never blocks on a full pipe
+        proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                stderr=said)
+        try:
+            with contextlib.suppress(BrokenPipeError):  # ffmpeg stopped early: it says why
+                for frame in itertools.chain([first], frames):
+                    proc.stdin.write(frame.tobytes())
+        finally:
+            with contextlib.suppress(BrokenPipeError):
+                proc.stdin.close()
+            proc.wait()
+        if proc.returncode != 0:
+            said.seek(0)
+            raise RenderError(f"ffmpeg failed writing {out}: "
+                              f"{said.read().decode(errors='replace').strip()}")
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="inhand-render", description=__doc__,

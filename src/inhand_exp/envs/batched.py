@@ -39,15 +39,6 @@ class SleepyParallelEnv(ParallelEnv):
 
     poll_s = 0.0005
 
-    def _start_workers(self) -> None:
-        # A Ctrl-C or SIGTERM while the workers are being spawned would leave a child reading
-        # its start-up data after the main process has let it go, printing a traceback of its
-        # own: the two signals wait until every worker has started (TorchRL waits for each),
-        # then stop the run as usual. (A Ctrl-C still reaches a child that is importing its
-        # modules then; it ignores the signal only from ``_make_row`` on.)
-        with signals_held(signal.SIGINT, signal.SIGTERM):
-            super()._start_workers()
-
     def _wait_for_workers(self, workers_range):
         flags = getattr(self, "_shm_done_flags", None)
         if self._use_buffers and flags is not None:
@@ -175,8 +166,11 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
                "once": once, "env_class": env_class, "owner": owner} for w in range(workers)]
     # A Ctrl-C or SIGTERM while the batch is built (TorchRL builds one environment in this
     # process to read its specs, then starts the workers at set_seed) waits until it is built,
-    # then stops the run with the batch closed: landing inside OmegaConf or PyBullet half-way,
-    # it used to leave their objects half-built and end the run with their error instead.
+    # then stops the run with the batch closed. Landing inside OmegaConf or PyBullet half-way,
+    # it would leave their objects half-built and end the run with their error; landing while
+    # the workers are spawned, it would leave a child reading its start-up data after the main
+    # process let it go, with a traceback of the child's own. (A Ctrl-C still reaches a child
+    # that is importing its modules then; it ignores the signal only from ``_make_row`` on.)
     env = None
     try:
         with signals_held(signal.SIGINT, signal.SIGTERM):

@@ -88,6 +88,30 @@ def test_a_chain_that_cuts_a_corner_is_searched_again_on_a_finer_grid(model):
             assert space.ok(a + (b - a) * s)
 
 
+def test_the_free_pieces_say_when_a_chain_of_cells_exists(model):
+    """``FreeSpace.component``: two joint vectors carry one label exactly when the search
+    finds a chain of free cells between them (random pairs at a low and a high pose)."""
+    rng = np.random.default_rng(3)
+    verdicts = {True: 0, False: 0}
+    for pose in (np.array([0.0, 0.30, 0.0]), np.array([0.02, 0.44, 0.2])):
+        for finger in (0, 2):
+            space = FreeSpace(model, finger, pose, margin=0.006)
+            f = model.fingers[finger]
+            lo, hi = np.array(f.q_lower) + 0.05, np.array(f.q_upper) - 0.05
+            qs = [q for q in rng.uniform(lo, hi, size=(80, 2)) if space.ok(q)][:16]
+            pairs = list(zip(qs[::2], qs[1::2], strict=False))
+            for c in (-0.19, -0.12, 0.0, 0.12):  # off the left side and off the right side
+                ends = [f.ik(pose[:2] + np.array([side * 0.045, c]), elbow)
+                        for side in (-1, 1) for elbow in (1, -1)]
+                ends = [q for q in ends if q is not None and space.ok(q)]
+                pairs += [(a, b) for a in ends for b in ends if a is not b]
+            for a, b in pairs:
+                same = space.component(a) == space.component(b) != 0
+                assert same == (jp._chain(space, a, b) is not None)
+                verdicts[same] += 1
+    assert verdicts[True] > 0 and verdicts[False] > 0, verdicts
+
+
 def test_no_path_when_the_pole_is_too_low(model):
     pose = np.array([0.0, 0.30, 0.0])  # lower end 5 cm above the palm: no finger passes
     f = model.fingers[0]

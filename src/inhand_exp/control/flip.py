@@ -42,6 +42,9 @@ OPPOSITE = {Face.TOP: Face.BOTTOM, Face.BOTTOM: Face.TOP,
             Face.LEFT: Face.RIGHT, Face.RIGHT: Face.LEFT}
 SPAN_TOL_M = 1e-5  # landing_span's bounds are trusted this far inside and outside of them
 PHASES = {"unload": 0.12, "travel": 0.55, "touch": 0.1, "load": 0.1}  # the rest settles
+LIFT_M = 0.02  # how far the tip lifts off the face before its travel, and hovers off the new one
+AIR_M = 0.006  # the margin of the travel round the object (links and tip)
+PRESS_M = 0.001  # how far inside the new face the tip is aimed when it touches
 
 
 def phase_times(duration_s: float, phases: dict[str, float]) -> dict[str, tuple[float, float]]:
@@ -131,6 +134,23 @@ def face_gap(model: HandModel, contacts: Contacts, face: Face, obs,
     return float(np.mean(gaps)) if gaps else 0.0
 
 
+def ik_clear(model: HandModel, finger: int, point_O: np.ndarray, pose: np.ndarray,
+             R: np.ndarray, margin: float, prefer: int | None = None,
+             check_pose: np.ndarray | None = None) -> np.ndarray | None:
+    """Joint angles of ``finger`` putting its tip centre at ``point_O`` (object frame) with the
+    links ``margin`` clear of the object (at ``check_pose`` if given), the elbow branch
+    ``prefer`` tried first."""
+    f = model.fingers[finger]
+    check = pose if check_pose is None else check_pose
+    order = (1, -1) if prefer is None or prefer == 1 else (-1, 1)
+    for elbow in order:
+        qi = f.ik(pose[:2] + R @ point_O, elbow)
+        if qi is not None and f.within_limits(qi, 0.05) and \
+                model.finger_gap(finger, qi, check) >= margin:
+            return qi
+    return None
+
+
 class Flip:
     """Primitive: move ``finger`` to the opposite face.
 
@@ -143,10 +163,10 @@ class Flip:
     """
 
     def __init__(self, model: HandModel, contacts: Contacts, finger: int, duration_s: float,
-                 gains: PrimitivesConfig | None = None, clearance_m: float = 0.02,
-                 press_m: float = 0.001, kp_joint: float = 900.0, kd_joint: float = 60.0,
+                 gains: PrimitivesConfig | None = None, clearance_m: float = LIFT_M,
+                 press_m: float = PRESS_M, kp_joint: float = 900.0, kd_joint: float = 60.0,
                  max_plans: int = 6,
-                 air_m: float = 0.006):
+                 air_m: float = AIR_M):
         self.model, self.contacts, self.finger = model, contacts, finger
         self.duration_s, self.gains = duration_s, gains or PrimitivesConfig()
         self.clearance, self.press = clearance_m, press_m
@@ -189,17 +209,7 @@ class Flip:
     def _ik_clear(self, point_O: np.ndarray, pose: np.ndarray, R: np.ndarray,
                   margin: float, prefer: int | None = None,
                   check_pose: np.ndarray | None = None) -> np.ndarray | None:
-        """Joint angles putting the tip centre at ``point_O`` with the links ``margin`` clear
-        of the object (at ``check_pose`` if given), the branch ``prefer`` first."""
-        f = self.model.fingers[self.finger]
-        check = pose if check_pose is None else check_pose
-        order = (1, -1) if prefer is None or prefer == 1 else (-1, 1)
-        for elbow in order:
-            qi = f.ik(pose[:2] + R @ point_O, elbow)
-            if qi is not None and f.within_limits(qi, 0.05) and \
-                    self.model.finger_gap(self.finger, qi, check) >= margin:
-                return qi
-        return None
+        return ik_clear(self.model, self.finger, point_O, pose, R, margin, prefer, check_pose)
 
     def _landing(self, obs, face: Face, step_m: float = 0.005
                  ) -> tuple[float, JointPath] | None:

@@ -20,6 +20,7 @@ import functools
 import math
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
@@ -66,6 +67,20 @@ class FreeSpace:
         k = np.arange(self.n)
         return self._ok((self.lo[0] + self.step[0] * k)[:, None],
                         (self.lo[1] + self.step[1] * k)[None, :])
+
+    @functools.cached_property
+    def components(self) -> np.ndarray:
+        """The connected pieces of the free cells (8-connected, the moves of the search): a
+        label per cell, 0 where it is blocked. A chain of cells joins two free cells exactly
+        when they carry one label."""
+        labels, _ = ndimage.label(self.grid, structure=np.ones((3, 3), dtype=int))
+        return labels
+
+    def component(self, q: np.ndarray) -> int:
+        """The label of the free cell a search from or to ``q`` uses (``nearest_free``), 0
+        when there is none."""
+        cell = self.nearest_free(q)
+        return 0 if cell is None else int(self.components[cell])
 
     def ok_many(self, Q: np.ndarray) -> np.ndarray:
         """For each row of ``Q`` (n, 2): the links and the tip clear of the object by the

@@ -53,7 +53,7 @@ from inhand_exp.task.actions import Action, action_table
 from inhand_exp.task.graph import SIDES, Lattice, PoseGraph, build_graph
 from inhand_exp.task.rules import to_go
 
-GRAPH_VERSION = 4  # bump when the graph's definition changes: old caches are not reused
+GRAPH_VERSION = 5  # bump when the graph's definition changes: old caches are not reused
 
 
 def from_config(cfg) -> Search:

@@ -19,7 +19,10 @@ Edges join neighbouring nodes by one primitive:
   coordinate, the pose and the other two contacts unchanged, allowed only when the two staying
   fingers are on opposite faces and can hold the object alone against gravity at the cell's
   angle (the force distribution the flip itself needs, ``flip.pair_holds``: two contacts
-  barely more than a pole's width apart along it can, others cannot).
+  barely more than a pole's width apart along it can, others cannot), and when the finger's
+  joint space has a way from its lift off the old face to its hover over the new one
+  (``way_table``: for an upright pole, only when it is held high enough for the finger to pass
+  under its lower end). Each direction is checked on its own.
 
 An edge weighs the simulated time of the mid-level actions that carry it out (a 2 cm cell is
 two 1 cm reposes of ``primitives.repose_duration_s``). Every check is per finger and per cell,
@@ -39,6 +42,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from inhand_exp.config import PrimitivesConfig
+from inhand_exp.control.flip import AIR_M, LIFT_M, PRESS_M, ik_clear
 from inhand_exp.control.forces import Squeeze
 from inhand_exp.control.grasp import (
     Contacts,
@@ -49,6 +53,8 @@ from inhand_exp.control.grasp import (
     rotation,
 )
 from inhand_exp.control.hand import HandModel
+from inhand_exp.control.handover import hover
+from inhand_exp.control.joint_path import FreeSpace
 from inhand_exp.control.repose import GraspPlan, object_wrench, strict_hold
 from inhand_exp.control.sample import Workspace, postures
 from inhand_exp.control.slide import MAX_PUSH_N, drag_of, slide_forces
@@ -161,6 +167,54 @@ def slide_table(model: HandModel, lattice: Lattice, posture: Posture, finger: in
                 S[(d, *k, t)] = slide_forces(plan, rest, finger, float(angle), model, prim,
                                              max_push_n) is None
     return S
+
+
+def way_table(model: HandModel, lattice: Lattice, finger: int) -> np.ndarray:
+    """``W[s, k, k2, x, z, t]``: with the object at that pose, ``finger`` lifted off side
+    ``SIDES[s]`` at coordinate ``cs[k]`` can travel to hover over the other side at ``cs[k2]``
+    through its joint space, as a flip plans it (``Flip._path``: its lift and hover joint
+    angles, with their elbow branches, and a chain of free cells of ``FreeSpace`` between them,
+    which exists exactly when both lie in one of its connected pieces). The lift takes either
+    elbow branch (the cell does not say which the finger has), so the table may allow a flip
+    that a finger on the other branch cannot make. For an upright pole the way passes under its
+    lower end, so it exists only with the pole held high enough above the palm."""
+    K, X, Z, T = lattice.shape
+    W = np.zeros((2, K, K, X, Z, T), dtype=bool)
+    shape, r = model.shape, model.tip_radius
+    for (ix, x), (iz, z), (it, t) in itertools.product(
+            enumerate(lattice.xs), enumerate(lattice.zs), enumerate(lattice.ts)):
+        pose = np.array([x, z, t])
+        R = rotation(t)
+        space = FreeSpace(model, finger, pose, AIR_M)
+        lifts, hovers = [], []  # per side: the labels of each coordinate's free piece
+        for face in SIDES:
+            reach = shape.half_extent(face) - 2 * r
+            lift_k, hover_k = [], []
+            for c in lattice.cs:
+                c = float(c)
+                point = hover(shape.half_x, shape.half_z, face, c, r + LIFT_M)
+                lift = set()
+                for elbow in (1, -1):
+                    q = ik_clear(model, finger, point, pose, R, model.clearance, prefer=elbow)
+                    if q is not None and space.ok(q):
+                        lift.add(space.component(q))
+                lift.discard(0)
+                lift_k.append(lift)
+                label = 0
+                touch = ik_clear(model, finger, hover(shape.half_x, shape.half_z, face, c,
+                                                      r - PRESS_M), pose, R, model.clearance)
+                if touch is not None and abs(c) <= reach:
+                    q = ik_clear(model, finger, point, pose, R, model.clearance,
+                                 prefer=1 if touch[1] >= 0 else -1)
+                    if q is not None and space.ok(q):
+                        label = space.component(q)
+                hover_k.append(label)
+            lifts.append(lift_k)
+            hovers.append(hover_k)
+        for s in range(2):
+            for k, k2 in itertools.product(range(K), repeat=2):
+                W[s, k, k2, ix, iz, it] = hovers[1 - s][k2] in lifts[s][k]
+    return W
 
 
 def finger_table(model: HandModel, lattice: Lattice, margin: float = 0.1) -> np.ndarray:
@@ -315,6 +369,7 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
                     go = S[:-1] & S[1:]  # the force check at both ends of the edge
                     link(np.where(go, src, -1), dst, n * prim.slide_duration_s, both=False)
     if prim.flip:
+        ways = {f: way_table(model, lat, f) for f in FLIP_FINGERS}
         for p, posture in enumerate(ps):
             for f in FLIP_FINGERS:
                 stay = [j for j in range(3) if j != f]
@@ -325,13 +380,13 @@ def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
                 if other not in ps:
                     continue
                 q = ps.index(other)
-                if p > q:  # each pair of postures once: a flip links both ways
-                    continue
                 held = pair_table(model, lat, posture, f, prim)[:, :, None, None, :]
+                way = ways[f][SIDES.index(posture.faces[f])]  # (K_f, K_f', X, Z, T)
                 src = np.moveaxis(ids[p], f, 0)  # (K_f, K_a, K_b, X, Z, T)
                 dst = np.moveaxis(ids[q], f, 0)
                 for k, k2 in itertools.product(range(K), repeat=2):
-                    link(np.where(held, src[k], -1), dst[k2], prim.flip_duration_s)
+                    go = held & way[k, k2][None, None]
+                    link(np.where(go, src[k], -1), dst[k2], prim.flip_duration_s, both=False)
     n = int(valid.sum())
     r, c, w = (np.concatenate(v) if v else np.zeros(0) for v in (rows, cols, weights))
     matrix = sparse.coo_matrix((w, (r, c)), shape=(n, n)).tocsr()

@@ -258,6 +258,14 @@ class TaskConfig:
     reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")
     reward_progress: float = spec(0.0, "Shaping: reward per tolerance (1 cm, 0.1 rad) of "
                                   "progress towards the goal; 0 is the paper's reward.")
+    reward_route: float = spec(0.0, "Shaping: reward per second of the search graph's "
+                               "shortest route to the goal that an action saves (task/route.py; "
+                               "the graph of learner=search at its default resolution, cached in "
+                               "logs/cache); 0 is the paper's reward.", ge=0)
+    route_cap_s: float = spec(40.0, "Route times longer than this, and states with no route, "
+                              "count as this long (s).", gt=0)
+    route_cache_dir: str = spec("logs/cache", "Where the route shaping's graph is kept "
+                                "(learner=search's default cache: they share the file).")
     success_tol_m: float = spec(0.01, "Success tolerance on |dx| and |dz| (m).", gt=0)
     success_tol_rad: float = spec(0.1, "Success tolerance on |dtheta| (rad).", gt=0)
     max_actions: int = spec(200, "Time limit in mid-level actions (the authors': 200).", gt=0)

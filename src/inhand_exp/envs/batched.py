@@ -22,9 +22,10 @@ from contextlib import contextmanager
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 
-from inhand_exp.config import ConfigError
+from inhand_exp.config import ConfigError, SearchConfig
 from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.task.goals import GoalPair
+from inhand_exp.task.graph import cached_graph
 
 
 class SleepyParallelEnv(ParallelEnv):
@@ -155,6 +156,9 @@ def batched_env(cfg: DictConfig, seed: int, goals: list[GoalPair] | None = None,
     share of the goals (evaluation).
     """
     workers, per = layout(cfg, num_envs)
+    if cfg.task.reward_route > 0 and env_class is PrimitiveEnv:
+        # built here once, read by every worker
+        cached_graph(cfg, SearchConfig(cache_dir=cfg.task.route_cache_dir))
     plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
     rows = [None] * workers
     if goals is not None:

@@ -145,6 +145,7 @@ class PrimitiveEnv(EnvBase):
         a = int(tensordict["action"])
         action, task = self.actions[a], self.task
         before = task.to_go(self.pose)  # as observed at the last output
+        route_before = task.route_to_go()  # None without the route shaping
         useful, valid, outcome = False, True, "rejected"
         dropped, sim_time = False, 0.0
         if self.snapshots is not None:
@@ -172,7 +173,8 @@ class PrimitiveEnv(EnvBase):
                 pose, q = self.world.object_pose(), self.world.joint_q()
                 useful = fresh and flip_useful(self.model, self.model.measured(
                     self.contacts, pose, q), action.finger, pose, task.goal)
-        v = task.judge(dropped, sim_time, valid=valid, useful_flip=useful, before=before)
+        v = task.judge(dropped, sim_time, valid=valid, useful_flip=useful, before=before,
+                       route_before=route_before)
         td = self._output(valid, outcome, done=v.terminated or v.truncated,
                           terminated=v.terminated, truncated=v.truncated)
         td["reward"] = torch.tensor([v.reward], dtype=torch.float32)

@@ -28,8 +28,6 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import time
 from collections import OrderedDict
@@ -38,72 +36,27 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from omegaconf import OmegaConf
-from scipy import sparse
 from torchrl.envs import EnvBase
 
-from inhand_exp.config import ConfigError, PrimitivesConfig, SearchConfig, TaskConfig, typed
-from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
+from inhand_exp.config import PrimitivesConfig, SearchConfig, TaskConfig, typed
+from inhand_exp.control.grasp import Contacts, Posture
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.learn.checkpoint import read_checkpoint, save_checkpoint, stamped, trained_with
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import Action, action_table
-from inhand_exp.task.graph import SIDES, Lattice, PoseGraph, build_graph
+from inhand_exp.task.graph import (
+    SIDES,
+    PoseGraph,
+    cached_graph,
+    contacts_of,
+    graph_key,
+)
 from inhand_exp.task.rules import to_go
-
-GRAPH_VERSION = 5  # bump when the graph's definition changes: old caches are not reused
 
 
 def from_config(cfg) -> Search:
     return Search(cfg)
-
-
-def graph_key(cfg) -> str:
-    """A digest of everything that shapes the graph."""
-    parts = {k: OmegaConf.to_container(cfg[k], resolve=True, enum_to_str=True)
-             for k in ("hand", "object", "primitives")}
-    task = typed(cfg["task"], TaskConfig)
-    parts["workspace"] = [task.workspace_x_m, task.workspace_z_m, task.workspace_theta_rad]
-    s = typed(cfg["learner"], SearchConfig)
-    parts["resolution"] = [s.resolution_m, s.resolution_rad, s.contact_resolution_m]
-    parts["gravity"] = cfg["sim"]["gravity_mps2"]
-    parts["version"] = GRAPH_VERSION
-    blob = json.dumps(parts, sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()[:16]
-
-
-def save_graph(graph: PoseGraph, path: Path) -> None:
-    lat, m = graph.lattice, graph.matrix
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, xs=lat.xs, zs=lat.zs, ts=lat.ts, cs=lat.cs, ids=graph.ids,
-                        data=m.data, indices=m.indices, indptr=m.indptr,
-                        postures=np.array([[int(f) for f in p.faces] for p in graph.postures]),
-                        build_s=graph.build_s)
-    tmp.replace(path)
-
-
-def load_graph(path: Path) -> PoseGraph:
-    with np.load(path) as z:
-        lat = Lattice(z["xs"], z["zs"], z["ts"], z["cs"])
-        ps = [Posture(tuple(Face(int(f)) for f in row)) for row in z["postures"]]
-        n = int(z["indptr"].size - 1)
-        m = sparse.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=(n, n))
-        return PoseGraph(lat, ps, z["ids"], m, float(z["build_s"]))
-
-
-def check_size(model: HandModel, rules: TaskConfig, s: SearchConfig) -> None:
-    """Refuse a lattice of more than ``learner.max_cells`` candidate cells before building."""
-    lat = Lattice.build(model, Workspace.from_config(rules), s.resolution_m, s.resolution_rad,
-                        s.contact_resolution_m)
-    K, X, Z, T = lat.shape
-    cells = 6 * K**3 * X * Z * T
-    if cells > s.max_cells:
-        raise ConfigError(f"the search lattice has {cells:,} cells (learner.resolution_m="
-                          f"{s.resolution_m}, resolution_rad={s.resolution_rad}, "
-                          f"contact_resolution_m={s.contact_resolution_m}), more than "
-                          f"learner.max_cells={s.max_cells:,}")
 
 
 class Search:
@@ -120,7 +73,7 @@ class Search:
         self.rules = typed(cfg.task, TaskConfig)
         self.model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
         self.actions = action_table(self.prim)
-        self.key = graph_key(cfg)
+        self.key = graph_key(cfg, self.params)
         self.cache = Path(self.params.cache_dir) / f"graph-{self.key}.npz"
         self.graph: PoseGraph | None = None
         self.iteration, self.frames = 0, 0
@@ -132,19 +85,10 @@ class Search:
     def ensure_graph(self) -> PoseGraph:
         """The graph, loaded from the cache or built (and cached)."""
         if self.graph is None:
-            if self.cache.is_file():
-                t = time.perf_counter()
-                self.graph = load_graph(self.cache)
+            cached, t = self.cache.is_file(), time.perf_counter()
+            self.graph = g = cached_graph(self.cfg, self.params)
+            if cached:
                 self.stats["load_s"] = time.perf_counter() - t
-            else:
-                s = self.params
-                check_size(self.model, self.rules, s)
-                self.graph = build_graph(self.model, self.prim,
-                                         Workspace.from_config(self.rules), s.resolution_m,
-                                         s.resolution_rad, s.contact_resolution_m)
-                self.cache.parent.mkdir(parents=True, exist_ok=True)
-                save_graph(self.graph, self.cache)
-            g = self.graph
             self.stats.update(nodes=g.nodes, edges=g.edges, build_s=g.build_s,
                               memory_mb=g.bytes / 1e6)
         return self.graph
@@ -229,19 +173,10 @@ class SearchPolicy:
 
     def contacts(self, q: np.ndarray, pose: np.ndarray) -> Contacts:
         """The fingertips' side and place along the pole, from the joints and the pose."""
-        tips_O = (self.model.tips(q) - pose[:2]) @ rotation(pose[2])
-        faces = tuple(Face.RIGHT if t[0] > 0 else Face.LEFT for t in tips_O)
-        return Contacts(Posture(faces), tuple(float(t[1]) for t in tips_O))
+        return contacts_of(self.model, q, pose)
 
     def cell(self, contacts: Contacts, pose: np.ndarray) -> tuple | None:
-        g = self.graph
-        if contacts.posture not in g.postures:
-            return None
-        pc = g.lattice.pose_cell(pose)
-        ks = [g.lattice.contact_cell(c, self.model.shape.half_z) for c in contacts.coords]
-        if pc is None or any(k is None for k in ks):
-            return None
-        return (g.postures.index(contacts.posture), *ks, *pc)
+        return self.graph.cell(contacts, pose, self.model.shape.half_z)
 
     def field_for(self, goal: np.ndarray) -> np.ndarray:
         key = self.graph.lattice.pose_cell(goal)

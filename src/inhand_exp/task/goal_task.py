@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from inhand_exp.config import SearchConfig
 from inhand_exp.control.hand import GeometryError
 from inhand_exp.task.goals import (
     FLIP_FINGERS,
@@ -31,6 +32,8 @@ from inhand_exp.task.goals import (
     sample_pair,
     start_of,
 )
+from inhand_exp.task.graph import cached_graph
+from inhand_exp.task.route import RouteTime
 from inhand_exp.task.rules import reached, reward, to_go
 from inhand_exp.task.scene import Scene
 
@@ -57,7 +60,7 @@ class GoalTask:
     draw episodes from them uniformly (drawing a pair takes about 0.2 s, far longer than an
     end-to-end episode that drops the object at once). ``start``: the pose and grasp every
     training pair starts from (``goals.x0``), or None. ``fingers``: see ``goals.sample_pair``
-    (None: no pair is left out).
+    (None: no pair is left out). ``route``: the route potential of ``task.reward_route``.
     """
 
     def __init__(self, scene: Scene, groups: tuple[str, ...] = ("medium",),
@@ -65,8 +68,10 @@ class GoalTask:
                  once: bool = False, max_actions: int | None = None,
                  time_limit_s: float | None = None, pool: int = 0,
                  start: Start | None = None,
-                 fingers: tuple[int, ...] | None = FLIP_FINGERS):
+                 fingers: tuple[int, ...] | None = FLIP_FINGERS,
+                 route: RouteTime | None = None):
         self.scene, self.rules = scene, scene.rules
+        self.route = route
         self.start, self.fingers = start, fingers
         self.groups, self.hard_posture = tuple(groups), hard_posture
         self.goals, self.once = goals, once and goals is not None
@@ -85,8 +90,13 @@ class GoalTask:
         goals = cfg["goals"]
         limit = ({"time_limit_s": scene.rules.time_limit_s} if end_to_end
                  else {"max_actions": scene.rules.max_actions})
+        route = None
+        if scene.rules.reward_route > 0 and not end_to_end:
+            graph = cached_graph(cfg, SearchConfig(cache_dir=scene.rules.route_cache_dir))
+            route = RouteTime(graph, scene.model,
+                              scene.rules.route_cap_s)
         return cls(scene, tuple(goals["train_groups"]) or (goals["name"],),
-                   goals["hard_goal_posture"], **limit,
+                   goals["hard_goal_posture"], **limit, route=route,
                    start=start_of(scene.model, goals) if kwargs.get("goals") is None else None,
                    fingers=reach_fingers(scene.model, cfg), **kwargs)
 
@@ -136,15 +146,25 @@ class GoalTask:
         self.success = self.dropped = False
         return True
 
+    def route_to_go(self) -> float | None:
+        """The graph's route time from the simulated state to the goal (the route potential),
+        or None without ``route``."""
+        if self.route is None:
+            return None
+        w = self.scene.world
+        return self.route(w.joint_q(), w.object_pose(), self.goal)
+
     def to_go(self, pose: np.ndarray) -> float:
         """Distance of ``pose`` to the goal, in tolerances (the progress potential)."""
         return to_go(pose, self.goal, self.rules)
 
     def judge(self, dropped: bool, sim_time_s: float, valid: bool = True,
-              useful_flip: bool = False, before: float | None = None) -> Verdict:
+              useful_flip: bool = False, before: float | None = None,
+              route_before: float | None = None) -> Verdict:
         """Score one action that took ``sim_time_s`` and ended with ``dropped`` (the object no
         longer held, as the simulator says). Success is read from the simulated pose.
-        ``before``: ``to_go`` before the action, for the progress shaping."""
+        ``before``: ``to_go`` before the action, for the progress shaping; ``route_before``:
+        ``route_to_go`` before it, for the route shaping (none on a drop: the grasp is gone)."""
         self.n_actions += 1
         self.n_invalid += not valid
         self.sim_time += sim_time_s
@@ -155,6 +175,9 @@ class GoalTask:
         out_of_time = (self.max_actions is not None and self.n_actions >= self.max_actions) or (
             self.time_limit_s is not None and self.sim_time >= self.time_limit_s - 1e-9)
         progress = 0.0 if before is None else before - self.to_go(pose)
+        route = 0.0  # the goal's potential is 0; a drop pays none (its contacts mean nothing)
+        if route_before is not None and not self.dropped:
+            route = route_before - (0.0 if self.success else self.route_to_go())
         r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful_flip,
-                   progress=progress)
+                   progress=progress, route=route)
         return Verdict(self.success, self.dropped, terminated, not terminated and out_of_time, r)

@@ -33,15 +33,29 @@ over the nodes alone.
 from __future__ import annotations
 
 import functools
+import hashlib
 import itertools
+import json
 import math
+import os
+import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+from omegaconf import DictConfig, OmegaConf
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from inhand_exp.config import PrimitivesConfig
+from inhand_exp.config import (
+    ConfigError,
+    HandConfig,
+    ObjectConfig,
+    PrimitivesConfig,
+    SearchConfig,
+    TaskConfig,
+    typed,
+)
 from inhand_exp.control.flip import AIR_M, LIFT_M, PRESS_M, ik_clear
 from inhand_exp.control.forces import Squeeze
 from inhand_exp.control.grasp import (
@@ -61,6 +75,7 @@ from inhand_exp.control.slide import MAX_PUSH_N, drag_of, slide_forces
 from inhand_exp.task.goals import FLIP_FINGERS
 
 SIDES = (Face.LEFT, Face.RIGHT)
+GRAPH_VERSION = 5  # bump when the graph's definition changes: old caches are not reused
 
 
 @dataclass(frozen=True)
@@ -266,6 +281,25 @@ class PoseGraph:
         m = self.matrix
         return self.ids.nbytes + m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
 
+    def cell(self, contacts: Contacts, pose: np.ndarray, reach: float = 0.0) -> tuple | None:
+        """The index of the cell of ``contacts`` at ``pose`` in ``ids`` (posture, three contact
+        cells, pose cell), or None off the lattice; ``reach``: see ``Lattice.contact_cell``."""
+        if contacts.posture not in self.postures:
+            return None
+        pc = self.lattice.pose_cell(pose)
+        ks = [self.lattice.contact_cell(c, reach) for c in contacts.coords]
+        if pc is None or any(k is None for k in ks):
+            return None
+        return (self.postures.index(contacts.posture), *ks, *pc)
+
+    def near(self, cell: tuple) -> np.ndarray:
+        """The nodes of ``cell`` and of the cells one step from it along any of its contact and
+        pose axes (the same posture): where a state's own cell holds no node, the ones the
+        hand holds next to it."""
+        box = tuple(slice(max(0, c - 1), c + 2) for c in cell[1:])
+        ids = self.ids[(cell[0], *box)]
+        return ids[ids >= 0]
+
     def node(self, contacts: Contacts, pose: np.ndarray) -> int:
         """The node of the cell nearest to ``contacts`` at ``pose``, or -1."""
         if contacts.posture not in self.postures:
@@ -313,12 +347,87 @@ class PoseGraph:
         return float(m.data[row][hit[0]]) if hit.size else math.inf
 
 
+def contacts_of(model: HandModel, q: np.ndarray, pose: np.ndarray) -> Contacts:
+    """The fingertips' side and place along the pole, from the joints and the pose."""
+    tips_O = (model.tips(q) - pose[:2]) @ rotation(pose[2])
+    faces = tuple(Face.RIGHT if t[0] > 0 else Face.LEFT for t in tips_O)
+    return Contacts(Posture(faces), tuple(float(t[1]) for t in tips_O))
+
+
+def _plain(section) -> dict:
+    return (OmegaConf.to_container(section, resolve=True, enum_to_str=True)
+            if isinstance(section, DictConfig) else section)
+
+
+def graph_key(cfg, params: SearchConfig) -> str:
+    """A digest of everything that shapes the graph of ``cfg`` (a composed config, or the plain
+    dict a worker process gets) at the resolutions of ``params``."""
+    parts = {k: _plain(cfg[k]) for k in ("hand", "object", "primitives")}
+    task = typed(cfg["task"], TaskConfig)
+    parts["workspace"] = [task.workspace_x_m, task.workspace_z_m, task.workspace_theta_rad]
+    parts["resolution"] = [params.resolution_m, params.resolution_rad,
+                           params.contact_resolution_m]
+    parts["gravity"] = cfg["sim"]["gravity_mps2"]
+    parts["version"] = GRAPH_VERSION
+    blob = json.dumps(parts, sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def save_graph(graph: PoseGraph, path: Path) -> None:
+    lat, m = graph.lattice, graph.matrix
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")  # parallel builders do not collide
+    np.savez_compressed(tmp, xs=lat.xs, zs=lat.zs, ts=lat.ts, cs=lat.cs, ids=graph.ids,
+                        data=m.data, indices=m.indices, indptr=m.indptr,
+                        postures=np.array([[int(f) for f in p.faces] for p in graph.postures]),
+                        build_s=graph.build_s)
+    tmp.replace(path)
+
+
+def load_graph(path: Path) -> PoseGraph:
+    with np.load(path) as z:
+        lat = Lattice(z["xs"], z["zs"], z["ts"], z["cs"])
+        ps = [Posture(tuple(Face(int(f)) for f in row)) for row in z["postures"]]
+        n = int(z["indptr"].size - 1)
+        m = sparse.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=(n, n))
+        return PoseGraph(lat, ps, z["ids"], m, float(z["build_s"]))
+
+
+def check_size(model: HandModel, rules: TaskConfig, s: SearchConfig) -> None:
+    """Refuse a lattice of more than ``learner.max_cells`` candidate cells before building."""
+    lat = Lattice.build(model, Workspace.from_config(rules), s.resolution_m, s.resolution_rad,
+                        s.contact_resolution_m)
+    K, X, Z, T = lat.shape
+    cells = 6 * K**3 * X * Z * T
+    if cells > s.max_cells:
+        raise ConfigError(f"the search lattice has {cells:,} cells (learner.resolution_m="
+                          f"{s.resolution_m}, resolution_rad={s.resolution_rad}, "
+                          f"contact_resolution_m={s.contact_resolution_m}), more than "
+                          f"learner.max_cells={s.max_cells:,}")
+
+
+def cached_graph(cfg, params: SearchConfig) -> PoseGraph:
+    """The graph of ``cfg`` at the resolutions of ``params``: read from ``params.cache_dir``
+    (one file per ``graph_key``), or built and kept there."""
+    path = Path(params.cache_dir) / f"graph-{graph_key(cfg, params)}.npz"
+    if path.is_file():
+        return load_graph(path)
+    model = HandModel.from_config(typed(cfg["hand"], HandConfig), typed(cfg["object"],
+                                                                         ObjectConfig),
+                                  cfg["sim"]["gravity_mps2"])
+    rules = typed(cfg["task"], TaskConfig)
+    check_size(model, rules, params)
+    graph = build_graph(model, typed(cfg["primitives"], PrimitivesConfig),
+                        Workspace.from_config(rules), params.resolution_m,
+                        params.resolution_rad, params.contact_resolution_m)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_graph(graph, path)
+    return graph
+
+
 def build_graph(model: HandModel, prim: PrimitivesConfig, workspace: Workspace,
                 resolution_m: float, resolution_rad: float, contact_resolution_m: float
                 ) -> PoseGraph:
     """The graph at these resolutions (see the module docstring)."""
-    import time
-
     start = time.perf_counter()
     lat = Lattice.build(model, workspace, resolution_m, resolution_rad, contact_resolution_m)
     K, X, Z, T = lat.shape

@@ -47,14 +47,16 @@ def to_go(pose: np.ndarray, goal: np.ndarray, rules: TaskConfig) -> float:
 
 
 def reward(rules: TaskConfig, *, valid: bool, success: bool, useful_flip: bool,
-           progress: float = 0.0) -> float:
+           progress: float = 0.0, route: float = 0.0) -> float:
     """The paper's reward: +5 goal, -0.01 invalid action, +1 useful successful flip.
 
     ``progress``: how much closer the action brought the object, ``to_go`` before minus after
     (simulated poses); it pays ``reward_progress`` each, a potential-based shaping (Ng et al.
-    1999) that leaves the best policy unchanged and is off by default.
+    1999) that leaves the best policy unchanged and is off by default. ``route``: the seconds
+    of the search graph's route to the goal the action saved (``route.RouteTime``), paid
+    ``reward_route`` each, the same kind of shaping, also off by default.
     """
-    r = rules.reward_progress * progress
+    r = rules.reward_progress * progress + rules.reward_route * route
     if not valid:
         r += rules.reward_invalid
     if useful_flip:

@@ -260,8 +260,8 @@ class TaskConfig:
                                   "progress towards the goal; 0 is the paper's reward.")
     reward_route: float = spec(0.0, "Shaping: reward per second of the search graph's "
                                "shortest route to the goal that an action saves (task/route.py; "
-                               "the graph of learner=search at its default resolution, cached in "
-                               "logs/cache); 0 is the paper's reward.", ge=0)
+                               "the graph of learner=search at its default resolution, kept in "
+                               "route_cache_dir); 0 is the paper's reward.", ge=0)
     route_cap_s: float = spec(40.0, "Route times longer than this, and states with no route, "
                               "count as this long (s).", gt=0)
     route_cache_dir: str = spec("logs/cache", "Where the route shaping's graph is kept "

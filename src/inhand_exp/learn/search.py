@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,6 +50,7 @@ from inhand_exp.task.graph import (
     cached_graph,
     contacts_of,
     graph_key,
+    graph_path,
 )
 from inhand_exp.task.rules import to_go
 
@@ -74,7 +74,7 @@ class Search:
         self.model = HandModel.from_config(cfg.hand, cfg.object, cfg.sim.gravity_mps2)
         self.actions = action_table(self.prim)
         self.key = graph_key(cfg, self.params)
-        self.cache = Path(self.params.cache_dir) / f"graph-{self.key}.npz"
+        self.cache = graph_path(self.params, self.key)
         self.graph: PoseGraph | None = None
         self.iteration, self.frames = 0, 0
         self.trained_with: list[str] | None = None
@@ -140,12 +140,10 @@ class SearchPolicy:
     """Writes ``action`` for a batch of mid-level observations (see the module docstring)."""
 
     def __init__(self, graph: PoseGraph, model: HandModel, prim: PrimitivesConfig,
-                 rules: TaskConfig, actions: tuple[Action, ...], cached_goals: int = 64):
+                 rules: TaskConfig, actions: tuple[Action, ...]):
         self.graph, self.model, self.prim, self.rules = graph, model, prim, rules
         self.actions = actions
         self.walks: dict[int, _Walk] = {}
-        self.fields: OrderedDict[tuple, np.ndarray] = OrderedDict()
-        self.cached_goals = cached_goals
         lat = graph.lattice
         steps = {"x": abs(lat.xs[1] - lat.xs[0]) if len(lat.xs) > 1 else 1.0,
                  "z": abs(lat.zs[1] - lat.zs[0]) if len(lat.zs) > 1 else 1.0,
@@ -177,14 +175,6 @@ class SearchPolicy:
 
     def cell(self, contacts: Contacts, pose: np.ndarray) -> tuple | None:
         return self.graph.cell(contacts, pose, self.model.shape.half_z)
-
-    def field_for(self, goal: np.ndarray) -> np.ndarray:
-        key = self.graph.lattice.pose_cell(goal)
-        if key not in self.fields:
-            self.fields[key] = self.graph.distances_to(goal)
-            if len(self.fields) > self.cached_goals:
-                self.fields.popitem(last=False)
-        return self.fields[key]
 
     # --- acting ---------------------------------------------------------------------------------
 
@@ -232,7 +222,7 @@ class SearchPolicy:
             else:  # it did not arrive: plan around it
                 self._cut(walk, source, [target], a, goal)
                 walk.edge = None
-        d = walk.field if walk.field is not None else self.field_for(goal)
+        d = walk.field if walk.field is not None else self.graph.to_goal(goal)
         here = int(ids[cell]) if cell is not None else -1
         if here >= 0 and d[here] == 0.0 and self._stuck(walk, here, pose, goal):
             d = self._replan(walk, goal)
@@ -267,7 +257,7 @@ class SearchPolicy:
         ids = self.graph.ids
         if source < 0:
             walk.blocked.update((t, action) for t in targets)
-            return walk.field if walk.field is not None else self.field_for(goal)
+            return walk.field if walk.field is not None else self.graph.to_goal(goal)
         walk.cut.update((source, int(ids[t])) for t in targets if ids[t] >= 0)
         return self._replan(walk, goal)
 

@@ -39,7 +39,8 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass
+from collections import OrderedDict
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +76,7 @@ from inhand_exp.control.slide import MAX_PUSH_N, drag_of, slide_forces
 from inhand_exp.task.goals import FLIP_FINGERS
 
 SIDES = (Face.LEFT, Face.RIGHT)
+FIELDS_KEPT = 64  # goal cells whose distances a graph keeps (``PoseGraph.to_goal``)
 GRAPH_VERSION = 5  # bump when the graph's definition changes: old caches are not reused
 
 
@@ -207,23 +209,18 @@ def way_table(model: HandModel, lattice: Lattice, finger: int) -> np.ndarray:
             lift_k, hover_k = [], []
             for c in lattice.cs:
                 c = float(c)
+                # the lift and the hover are the same point off the face: its joint angles
+                # with each elbow branch preferred, and their free pieces (0: none)
                 point = hover(shape.half_x, shape.half_z, face, c, r + LIFT_M)
-                lift = set()
+                label = {}
                 for elbow in (1, -1):
                     q = ik_clear(model, finger, point, pose, R, model.clearance, prefer=elbow)
-                    if q is not None and space.ok(q):
-                        lift.add(space.component(q))
-                lift.discard(0)
-                lift_k.append(lift)
-                label = 0
+                    label[elbow] = space.component(q) if q is not None and space.ok(q) else 0
+                lift_k.append(set(label.values()) - {0})
                 touch = ik_clear(model, finger, hover(shape.half_x, shape.half_z, face, c,
                                                       r - PRESS_M), pose, R, model.clearance)
-                if touch is not None and abs(c) <= reach:
-                    q = ik_clear(model, finger, point, pose, R, model.clearance,
-                                 prefer=1 if touch[1] >= 0 else -1)
-                    if q is not None and space.ok(q):
-                        label = space.component(q)
-                hover_k.append(label)
+                hover_k.append(label[1 if touch[1] >= 0 else -1]
+                               if touch is not None and abs(c) <= reach else 0)
             lifts.append(lift_k)
             hovers.append(hover_k)
         for s in range(2):
@@ -265,6 +262,7 @@ class PoseGraph:
     ids: np.ndarray  # (P, K, K, K, X, Z, T) node id, -1 where the hand does not hold
     matrix: sparse.csr_matrix  # (n, n) edge weights (s)
     build_s: float = 0.0
+    _fields: OrderedDict = field(default_factory=OrderedDict, repr=False, compare=False)
 
     @property
     def nodes(self) -> int:
@@ -300,16 +298,6 @@ class PoseGraph:
         ids = self.ids[(cell[0], *box)]
         return ids[ids >= 0]
 
-    def node(self, contacts: Contacts, pose: np.ndarray) -> int:
-        """The node of the cell nearest to ``contacts`` at ``pose``, or -1."""
-        if contacts.posture not in self.postures:
-            return -1
-        cell = self.lattice.pose_cell(pose)
-        ks = [self.lattice.contact_cell(c) for c in contacts.coords]
-        if cell is None or any(k is None for k in ks):
-            return -1
-        return int(self.ids[(self.postures.index(contacts.posture), *ks, *cell)])
-
     def distances_to(self, goal: np.ndarray, cut: set[tuple[int, int]] = frozenset(),
                      spent: set[int] = frozenset()) -> np.ndarray:
         """Shortest time (s) from every node to any node at the goal's pose cell (inf where
@@ -333,6 +321,17 @@ class PoseGraph:
                 row = slice(reverse.indptr[v], reverse.indptr[v + 1])
                 reverse.data[row][reverse.indices[row] == u] = np.inf
         return csgraph.dijkstra(reverse, directed=True, indices=targets, min_only=True)
+
+    def to_goal(self, goal: np.ndarray) -> np.ndarray:
+        """``distances_to(goal)``, kept for the last ``FIELDS_KEPT`` goal cells (one Dijkstra
+        per goal cell, shared by everything that walks or reads this graph)."""
+        key = self.lattice.pose_cell(goal)
+        if key not in self._fields:
+            self._fields[key] = self.distances_to(goal)
+            if len(self._fields) > FIELDS_KEPT:
+                self._fields.popitem(last=False)
+        self._fields.move_to_end(key)
+        return self._fields[key]
 
     @functools.cached_property
     def reverse(self) -> sparse.csr_matrix:
@@ -405,12 +404,23 @@ def check_size(model: HandModel, rules: TaskConfig, s: SearchConfig) -> None:
                           f"learner.max_cells={s.max_cells:,}")
 
 
+_LOADED: dict[Path, PoseGraph] = {}  # graphs this process read from the cache, by file
+
+
+def graph_path(params: SearchConfig, key: str) -> Path:
+    """Where the graph of ``graph_key`` ``key`` is kept."""
+    return Path(params.cache_dir) / f"graph-{key}.npz"
+
+
 def cached_graph(cfg, params: SearchConfig) -> PoseGraph:
     """The graph of ``cfg`` at the resolutions of ``params``: read from ``params.cache_dir``
     (one file per ``graph_key``), or built and kept there."""
-    path = Path(params.cache_dir) / f"graph-{graph_key(cfg, params)}.npz"
+    path = graph_path(params, graph_key(cfg, params))
+    if path in _LOADED:  # the environments of one worker process share one graph
+        return _LOADED[path]
     if path.is_file():
-        return load_graph(path)
+        _LOADED[path] = graph = load_graph(path)
+        return graph
     model = HandModel.from_config(typed(cfg["hand"], HandConfig), typed(cfg["object"],
                                                                          ObjectConfig),
                                   cfg["sim"]["gravity_mps2"])

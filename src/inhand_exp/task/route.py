@@ -13,8 +13,6 @@ see the graph: it shapes the training reward only.
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numpy as np
 
 from inhand_exp.control.hand import HandModel
@@ -30,23 +28,10 @@ class RouteTime:
     nearest nodes stand in (``PoseGraph.near``), the best of them counting.
     """
 
-    def __init__(self, graph: PoseGraph, model: HandModel, cap_s: float, cached_goals: int = 8):
+    def __init__(self, graph: PoseGraph, model: HandModel, cap_s: float):
         if not cap_s > 0:
             raise ValueError(f"cap_s must be > 0, got {cap_s}")
         self.graph, self.model, self.cap_s = graph, model, cap_s
-        self.fields: OrderedDict[tuple, np.ndarray] = OrderedDict()
-        self.cached_goals = cached_goals
-
-    def field(self, goal: np.ndarray) -> np.ndarray:
-        """Route time from every node to the goal's cell (one Dijkstra per goal cell, kept for
-        the last ``cached_goals``)."""
-        key = self.graph.lattice.pose_cell(goal)
-        if key not in self.fields:
-            self.fields[key] = self.graph.distances_to(goal)
-            if len(self.fields) > self.cached_goals:
-                self.fields.popitem(last=False)
-        self.fields.move_to_end(key)
-        return self.fields[key]
 
     def __call__(self, q: np.ndarray, pose: np.ndarray, goal: np.ndarray) -> float:
         g = self.graph
@@ -57,4 +42,4 @@ class RouteTime:
         nodes = np.array([here]) if here >= 0 else g.near(cell)
         if nodes.size == 0:
             return self.cap_s
-        return float(min(self.cap_s, self.field(goal)[nodes].min()))
+        return float(min(self.cap_s, g.to_goal(goal)[nodes].min()))

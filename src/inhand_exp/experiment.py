@@ -344,7 +344,8 @@ def table(summary: dict[str, float], cfg, sampled: bool) -> str:
            f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions"
     flips = [f"{label:14s}{summary[f'{flag}_success_rate']:10.1%}{'-':>10s}"
              f"   ({summary[flag]} episodes; drops {summary[f'{flag}_drop_rate']:.1%})"
-             for flag, label in (("needs_flip", "needs a flip"), ("lone_down", "lone down"))
+             for flag, label in (("needs_flip", "needs a flip"), ("no_flip", "no flip needed"),
+                                 ("lone_down", "lone down"))
              if summary.get(flag)]
     return "\n".join([
         head,

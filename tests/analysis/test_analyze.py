@@ -78,6 +78,13 @@ def test_frames_tables_and_skipped_files(sweep):
     assert easy["paper_success"] == pytest.approx(0.954)
     flips = rows[rows["group"] == tables.NEEDS_FLIP].iloc[0]
     assert flips["episodes"] == 10  # the even hard episodes of both seeds
+    assert flips["success_rate_mean"] == pytest.approx((2 / 5 + 1 / 5) / 2)  # 0, 2 and 0 won
+    rest = rows[rows["group"] == tables.NO_FLIP].iloc[0]
+    assert rest["episodes"] == 10  # the odd ones
+    assert rest["success_rate_mean"] == pytest.approx((2 / 5 + 1 / 5) / 2)  # 1, 3 and 1 won
+    assert (flips["drop_rate_mean"], rest["drop_rate_mean"]) == (0.0, pytest.approx(0.2))
+    assert rows["group"].tolist().index(tables.NO_FLIP) == \
+        rows["group"].tolist().index(tables.NEEDS_FLIP) + 1
     lone = rows[rows["group"] == tables.LONE_DOWN].iloc[0]
     assert lone["episodes"] == 8  # medium episodes 0, 3, 6, 9 of both seeds; 0 and 3 succeed
     assert lone["success_rate_mean"] == pytest.approx(0.5)

@@ -12,8 +12,9 @@ import pandas as pd
 TABLES = ("comparison", "robustness", "cube")
 METRICS = ("success_rate", "drop_rate", "timeout_rate", "avg_time_s")
 NEEDS_FLIP = "hard, needs flip"
+NO_FLIP = "hard, no flip needed"
 LONE_DOWN = "medium, lone down"
-PAPER_ORDER = {"group": ("easy", "medium", LONE_DOWN, "hard", NEEDS_FLIP),
+PAPER_ORDER = {"group": ("easy", "medium", LONE_DOWN, "hard", NEEDS_FLIP, NO_FLIP),
                "perturb": ("none", "heavier", "lighter", "thicker", "thinner", "longer",
                            "shorter"),
                "noise": ("none", "paper")}
@@ -50,12 +51,23 @@ def _flagged(episodes: pd.DataFrame, group: str, flag: str) -> pd.DataFrame:
     return episodes[(episodes["group"] == group) & marked]
 
 
+def _unflagged(episodes: pd.DataFrame, group: str, flag: str) -> pd.DataFrame:
+    """The other episodes of ``group``; none where no episode of it carries ``flag`` (the row
+    would repeat the whole group's)."""
+    flagged = _flagged(episodes, group, flag)
+    if flagged.empty:
+        return flagged
+    return episodes[(episodes["group"] == group) & ~episodes.index.isin(flagged.index)]
+
+
 def _with_subset_rows(episodes: pd.DataFrame) -> pd.DataFrame:
-    """The episodes, plus again as rows of their own: the hard pairs that need a flip, and
-    the medium pairs whose lone finger must end lower on the pole (goals.lone_descends)."""
+    """The episodes, plus again as rows of their own: the hard pairs that need a flip and
+    the other hard pairs, and the medium pairs whose lone finger must end lower on the pole
+    (goals.lone_descends)."""
     return pd.concat([episodes,
                       _flagged(episodes, "medium", "lone_down").assign(group=LONE_DOWN),
-                      _flagged(episodes, "hard", "needs_flip").assign(group=NEEDS_FLIP)],
+                      _flagged(episodes, "hard", "needs_flip").assign(group=NEEDS_FLIP),
+                      _unflagged(episodes, "hard", "needs_flip").assign(group=NO_FLIP)],
                      ignore_index=True)
 
 

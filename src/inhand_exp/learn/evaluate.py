@@ -113,8 +113,12 @@ def summarise(records: list[Record]) -> dict[str, float]:
     n = len(records)
     wins = [r for r in records if r["success"]]
     out: dict[str, float] = {"episodes": n}
-    for flag in ("needs_flip", "lone_down"):  # the subsets the goal set flags
-        some = [r for r in records if r.get(flag)]
+    flips = any(r.get("needs_flip") for r in records)
+    subsets = {"needs_flip": lambda r: r.get("needs_flip"),  # the subsets the goal set flags
+               "no_flip": lambda r: flips and not r.get("needs_flip"),  # the others, if any
+               "lone_down": lambda r: r.get("lone_down")}
+    for flag, member in subsets.items():
+        some = [r for r in records if member(r)]
         out[flag] = len(some)
         out[f"{flag}_success_rate"] = (sum(r["success"] for r in some) / len(some)
                                        if some else float("nan"))

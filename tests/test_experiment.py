@@ -42,3 +42,17 @@ def test_a_policys_store_key_ignores_what_only_the_test_set_uses(compose_cfg):
     for shaping in ("train.frames=2048", "task.reward_progress=0.1", "goals.seed=5",
                     "goals.train_groups=[medium]"):
         assert key(shaping) != base, shaping
+
+
+def test_the_flagged_rows_say_how_many_episodes_flipped(compose_cfg):
+    counted = {**SUMMARY, "needs_flip": 170, "needs_flip_success_rate": 0.3,
+               "needs_flip_drop_rate": 0.05, "needs_flip_flipped": 77,
+               "needs_flip_flipped_success": 51, "no_flip": 330, "no_flip_success_rate": 0.7,
+               "no_flip_drop_rate": 0.04, "no_flip_flipped": 9, "no_flip_flipped_success": 6,
+               "lone_down": 0, "flipped": 86, "flipped_success": 57}
+    rows = table(counted, compose_cfg("goals=hard"), sampled=False).splitlines()
+    assert rows[6].endswith("(170 episodes; drops 5.0%; flipped in 77 (51 solved))")
+    assert rows[7].endswith("(330 episodes; drops 4.0%; flipped in 9 (6 solved))")
+    assert rows[-1] == "flipped in 86 of the 500 episodes, 57 of them solved"
+    older = {k: v for k, v in counted.items() if "flipped" not in k}  # no counts: no mention
+    assert "flipped" not in table(older, compose_cfg("goals=hard"), sampled=False)

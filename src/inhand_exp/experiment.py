@@ -329,6 +329,14 @@ def _seconds(value: float) -> str:
     return f"{value:10.2f}" if math.isfinite(value) else f"{'-':>10s}"
 
 
+def _flipped(summary: dict[str, float], prefix: str) -> str:
+    """"; flipped in N (M solved)" for a subset whose episodes counted their flips."""
+    if f"{prefix}flipped" not in summary:
+        return ""
+    return (f"; flipped in {summary[f'{prefix}flipped']} "
+            f"({summary[f'{prefix}flipped_success']} solved)")
+
+
 def table(summary: dict[str, float], cfg, sampled: bool) -> str:
     """The evaluation beside the paper's numbers for the same setting; ``sampled``: the
     policy drew its actions (else it acted deterministically)."""
@@ -343,10 +351,14 @@ def table(summary: dict[str, float], cfg, sampled: bool) -> str:
     head = f"{cfg.learner.name} {cfg.goals.name} {cfg.object.name} perturb={cfg.perturb.name} " \
            f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions"
     flips = [f"{label:14s}{summary[f'{flag}_success_rate']:10.1%}{'-':>10s}"
-             f"   ({summary[flag]} episodes; drops {summary[f'{flag}_drop_rate']:.1%})"
+             f"   ({summary[flag]} episodes; drops {summary[f'{flag}_drop_rate']:.1%}"
+             f"{_flipped(summary, f'{flag}_')})"
              for flag, label in (("needs_flip", "needs a flip"), ("no_flip", "no flip needed"),
                                  ("lone_down", "lone down"))
              if summary.get(flag)]
+    if summary.get("flipped"):
+        flips.append(f"flipped in {summary['flipped']} of the {summary['episodes']} episodes, "
+                     f"{summary['flipped_success']} of them solved")
     return "\n".join([
         head,
         f"{'':14s}{'ours':>10s}{'paper':>10s}",

@@ -22,7 +22,8 @@ def episode(k: int, group: str, success: bool, seed: int, dropped: bool = False)
             "n_invalid": 0, "x0": [0.0, 0.3, 0.0], "xg": [0.01, 0.3, 0.1],
             "final_pose": [0.0, 0.3, 0.0], "final_err_m": 0.0, "final_err_rad": 0.0,
             "needs_flip": group == "hard" and k % 2 == 0,
-            "lone_down": group == "medium" and k % 3 == 0, "object": "pole", "perturb": "none",
+            "lone_down": group == "medium" and k % 3 == 0,
+            "n_flips": int(group == "hard" and k % 4 == 0), "object": "pole", "perturb": "none",
             "noise": "none", "learner": "ppo", "seed": seed}
 
 
@@ -83,6 +84,10 @@ def test_frames_tables_and_skipped_files(sweep):
     assert rest["episodes"] == 10  # the odd ones
     assert rest["success_rate_mean"] == pytest.approx((2 / 5 + 1 / 5) / 2)  # 1, 3 and 1 won
     assert (flips["drop_rate_mean"], rest["drop_rate_mean"]) == (0.0, pytest.approx(0.2))
+    assert (flips["flipped_rate_mean"], rest["flipped_rate_mean"]) == (pytest.approx(0.6), 0.0)
+    assert "| flipped |" in tables.render(rows, "comparison")
+    older = frames.episodes.drop(columns="n_flips")  # logs written before the count
+    assert "flipped" not in tables.render(tables.build(older, "comparison"), "comparison")
     assert rows["group"].tolist().index(tables.NO_FLIP) == \
         rows["group"].tolist().index(tables.NEEDS_FLIP) + 1
     lone = rows[rows["group"] == tables.LONE_DOWN].iloc[0]

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 TABLES = ("comparison", "robustness", "cube")
-METRICS = ("success_rate", "drop_rate", "timeout_rate", "avg_time_s")
+METRICS = ("success_rate", "drop_rate", "timeout_rate", "avg_time_s", "flipped_rate")
 NEEDS_FLIP = "hard, needs flip"
 NO_FLIP = "hard, no flip needed"
 LONE_DOWN = "medium, lone down"
@@ -26,12 +26,16 @@ def paper_results() -> pd.DataFrame:
 
 
 def per_seed(episodes: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
-    """Success, drop and timeout rates and the mean time of the successes, per ``keys`` + seed."""
+    """Success, drop and timeout rates, the mean time of the successes and the share of
+    episodes that made a flip (of those that counted their flips; NaN where none did), per
+    ``keys`` + seed."""
     def rates(g: pd.DataFrame) -> pd.Series:
         wins = g[g["success"]]
+        flips = g["n_flips"].dropna() if "n_flips" in g else pd.Series(dtype=float)
         return pd.Series({"episodes": len(g), "success_rate": g["success"].mean(),
                           "drop_rate": g["dropped"].mean(), "timeout_rate": g["timeout"].mean(),
-                          "avg_time_s": wins["sim_time_s"].mean() if len(wins) else np.nan})
+                          "avg_time_s": wins["sim_time_s"].mean() if len(wins) else np.nan,
+                          "flipped_rate": (flips > 0).mean() if len(flips) else np.nan})
 
     return episodes.groupby([*keys, "seed"], dropna=False).apply(
         rates, include_groups=False).reset_index()
@@ -200,9 +204,10 @@ def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
     keys = [c for c in ("learner", "variant", "group", "perturb", "noise", "object")
             if c in rows.columns and (c != "variant" or rows[c].nunique() > 1)]
     vs = "vs_trained" in rows.columns  # Table III: the change from the trained object
+    flips = rows.get("flipped_rate_mean", pd.Series(dtype=float)).notna().any()
     head = [*keys, "seeds", "episodes", "success", "paper",
             *(("vs trained object", "paper") if vs else ()), "drops", "paper", "timeouts",
-            "avg time (s)", "paper"]
+            "avg time (s)", "paper", *(("flipped",) if flips else ())]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in rows.iterrows():
         cells = [str(r[k]) for k in keys] + [
@@ -214,6 +219,7 @@ def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
             _cell(r["drop_rate_mean"], r["drop_rate_std"], True), _ref(r.get("paper_drop"), True),
             _cell(r["timeout_rate_mean"], r["timeout_rate_std"], True),
             _cell(r["avg_time_s_mean"], r["avg_time_s_std"], False),
-            _ref(r.get("paper_time_s"), False)]
+            _ref(r.get("paper_time_s"), False),
+            *((_cell(r["flipped_rate_mean"], r["flipped_rate_std"], True),) if flips else ())]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -5,7 +5,9 @@ The environment is a batch of ``n`` primitive environments built on the same goa
 is the goal's index and the results do not depend on how the batch runs. Each episode yields one
 record (the ``/eval/episode`` fields), each action one ``/episode/action`` record and, when the
 environment records them, the ``/sim/state`` snapshots; the summary has the success, drop and
-timeout rates and the mean simulated time of the successful episodes.
+timeout rates and the mean simulated time of the successful episodes. With the action names,
+an episode also counts its flips (``n_flips``: flips, or the cube's lands, that ended
+``done``), so that the pairs that need one show how often the policy made one.
 """
 
 from __future__ import annotations
@@ -25,6 +27,13 @@ from inhand_exp.task.rules import pose_error
 
 Record = dict[str, Any]
 Sink = Callable[[Record], None]
+DONE = OUTCOMES.index("done")
+
+
+def is_flip(name: str) -> bool:
+    """Whether the action named ``name`` moves a finger to another face: a flip, or the land
+    that ends the cube's release-and-land."""
+    return name.startswith(("flip", "land"))
 
 
 def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
@@ -40,6 +49,9 @@ def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
     need = np.array([len(goals[i::n]) for i in range(n)])
     played = np.zeros(n, dtype=int)  # finished episodes of each environment
     steps, invalid = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
+    flips = np.zeros(n, dtype=int)
+    flip_actions = None if action_names is None else {
+        k for k, name in enumerate(action_names) if is_flip(name)}
     records: list[Record] = []
     mode = ExplorationType.RANDOM if sample else ExplorationType.DETERMINISTIC
     with set_exploration_type(mode), torch.no_grad():
@@ -62,13 +74,18 @@ def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
                         on_state(msg)
                 steps[i] += 1
                 invalid[i] += not bool(row["next", "valid"])
+                if flip_actions is not None:
+                    flips[i] += (int(row["action"]) in flip_actions
+                                 and int(row["next", "outcome"]) == DONE)
                 if done[i]:
                     rec = _episode(row["next"], goals[ep], ep, int(steps[i]), int(invalid[i]))
+                    if flip_actions is not None:
+                        rec["n_flips"] = int(flips[i])
                     records.append(rec)
                     if on_episode is not None:
                         on_episode(rec)
                     played[i] += 1
-                    steps[i], invalid[i] = 0, 0
+                    steps[i], invalid[i], flips[i] = 0, 0, 0
             _states(root, [i for i in range(n) if done[i]], played, n, on_state, need)
             td = root
     records.sort(key=lambda r: r["episode"])
@@ -109,6 +126,17 @@ def _episode(last, pair: GoalPair, episode: int, n_actions: int, n_invalid: int)
             "lone_down": bool(pair.lone_down)}
 
 
+def _flipped(records: list[Record], prefix: str = "") -> dict[str, int]:
+    """How many of ``records`` made a flip, and how many of those succeeded; nothing when
+    they do not count their flips."""
+    counted = [r for r in records if "n_flips" in r]
+    if not counted:
+        return {}
+    made = [r for r in counted if r["n_flips"] > 0]
+    return {f"{prefix}flipped": len(made),
+            f"{prefix}flipped_success": sum(r["success"] for r in made)}
+
+
 def summarise(records: list[Record]) -> dict[str, float]:
     n = len(records)
     wins = [r for r in records if r["success"]]
@@ -124,6 +152,8 @@ def summarise(records: list[Record]) -> dict[str, float]:
                                        if some else float("nan"))
         out[f"{flag}_drop_rate"] = (sum(r["dropped"] for r in some) / len(some)
                                     if some else float("nan"))
+        out.update(_flipped(some, f"{flag}_"))
+    out.update(_flipped(records))
     return {**out,
             "success_rate": len(wins) / n,
             "drop_rate": sum(r["dropped"] for r in records) / n,

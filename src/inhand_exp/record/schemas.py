@@ -162,6 +162,8 @@ EVAL_EPISODE = _topic(
         "lone_down": _boolean("True when the initial posture holds the object at the goal only "
                               "with its lone finger lower on the pole than at the start (the "
                               "goal set's own flag)."),
+        "n_flips": _integer("Flips (for the cube: lands) that ended done; absent where the "
+                            "learner's actions are not primitives."),
         "object": _string("Name of the object config."),
         "perturb": _string("Name of the perturbation config."),
         "noise": _string("Name of the noise config."),

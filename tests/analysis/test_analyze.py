@@ -220,6 +220,18 @@ def test_variant_keeps_only_what_changes_the_policy():
         "goals.train_groups=[easy,hard] task.reward_progress=0.1")
 
 
+def test_a_training_on_its_own_group_has_that_group_in_its_variant():
+    """Without ``goals.train_groups`` a training draws from its ``goals`` group: policies
+    trained on medium and on hard goals are two recipes; an evaluation's group is not one."""
+    medium = variant(["mode=train", "goals=medium", "task.reward_progress=0.1"])
+    assert medium == "goals.train_groups=[medium] task.reward_progress=0.1"
+    assert variant(["mode=train_eval", "goals=hard"]) == "goals.train_groups=[hard]"
+    assert variant(["mode=train", "goals=hard", "goals.train_groups=[easy,hard]"]) == (
+        "goals.train_groups=[easy,hard]")
+    assert variant(["mode=eval", "goals=hard", "task.reward_progress=0.1"]) == (
+        "task.reward_progress=0.1")
+
+
 def test_a_recipe_choice_and_its_values_given_one_by_one_are_one_variant():
     recipe = variant(["+recipe=ppo", "+profile=full", "seed=2", "goals=hard"])
     assert recipe == variant(["mode=train", "train.frames=163840", "task.reward_progress=0.1",

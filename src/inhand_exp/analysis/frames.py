@@ -32,6 +32,7 @@ NOT_RECIPE = {"seed", "mode", "checkpoint", "goals", "resume", "learner", "objec
               "noise", "train.frames", "train.workers", "train.backend", "train.num_envs",
               "learner.cache_dir"}
 NOT_RECIPE_PREFIXES = ("hydra", "+hydra", "log.", "eval.")
+EVALUATING = ("eval", "demo", "goals")  # modes whose ``goals`` is a test set, not training's
 PARALLEL_BYTES = 32 << 20  # logs smaller than this in all are read in this process
 
 
@@ -40,9 +41,15 @@ def variant(overrides: Iterable[str]) -> str:
     reward, the observation, the training goals...), sorted; "default" when there is none.
     A ``+recipe=`` or ``+profile=`` choice counts as the values its file sets, so a sweep's
     ``+recipe=ppo`` and the same values given one by one are one recipe; a later override of
-    a key replaces the earlier value."""
+    a key replaces the earlier value. A training that names no ``goals.train_groups`` trains
+    on its own ``goals`` group, so that group is part of its recipe."""
+    given = merged([], _expanded(overrides))
+    values = dict(o.lstrip("+~").split("=", 1) for o in given if "=" in o)
+    if ("goals.train_groups" not in values and "goals" in values
+            and values.get("mode") not in EVALUATING):
+        given.append(f"goals.train_groups=[{values['goals']}]")
     keep = []
-    for o in merged([], _expanded(overrides)):
+    for o in given:
         key = o.split("=", 1)[0].lstrip("+~")
         if key in NOT_RECIPE or key.startswith(NOT_RECIPE_PREFIXES):
             continue

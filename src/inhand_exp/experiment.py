@@ -31,7 +31,7 @@ from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
 from inhand_exp.record.scene import SceneGeometry, SceneReplay
 from inhand_exp.runinfo import merged
-from inhand_exp.task.actions import action_table
+from inhand_exp.task.actions import action_table, flip_actions
 from inhand_exp.task.goals import (
     GoalPair,
     GoalsError,
@@ -297,12 +297,14 @@ def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
     def on_action(rec: dict) -> None:
         log.write("/episode/action", rec)
 
-    names = [a.name for a in action_table(cfg.primitives)] if learner.per_action_log else None
+    actions = action_table(cfg.primitives) if learner.per_action_log else None
     try:
         summary = evaluate(env, learner.policy, goals, on_episode=on_episode,
-                           on_action=on_action if names else None,
+                           on_action=on_action if actions else None,
                            on_state=on_state,
-                           action_names=names, sample=cfg.eval.sample)
+                           action_names=[a.name for a in actions] if actions else None,
+                           sample=cfg.eval.sample,
+                           flip_actions=flip_actions(actions) if actions else None)
     finally:
         bar.close()
         env.close()

@@ -60,10 +60,14 @@ def test_an_evaluation_counts_the_flips_its_episodes_made(compose_cfg):
     its finished flips, as its action records show, the other none."""
     from inhand_exp.envs.batched import batched_env
     from inhand_exp.learn.evaluate import evaluate
-    from inhand_exp.task.actions import action_table
+    from inhand_exp.task.actions import action_table, flip_actions
 
     cfg = compose_cfg("task.max_actions=2", "train.backend=serial", "train.workers=1")
-    names = [a.name for a in action_table(cfg.primitives)]
+    actions = action_table(cfg.primitives)
+    names = [a.name for a in actions]
+    assert {names[k] for k in flip_actions(actions)} == {"flip left", "flip right"}
+    cube = action_table(compose_cfg("object=cube").primitives)
+    assert {cube[k].name for k in flip_actions(cube)} == {f"land finger {i}" for i in range(3)}
     flip = names.index("flip right")
     high = Contacts(Posture((L, R, R)), (-0.21, -0.205, -0.15))
     bend = Contacts(Posture((L, L, R)), (-0.21, -0.09, -0.15))
@@ -75,11 +79,12 @@ def test_an_evaluation_counts_the_flips_its_episodes_made(compose_cfg):
         return td.set("action", torch.where(mask[..., flip], flip, mask.int().argmax(-1)))
 
     env = batched_env(cfg, seed=0, goals=goals, num_envs=1, once=True)
-    episodes, actions = [], []
-    summary = evaluate(env, policy, goals, episodes.append, actions.append, action_names=names)
+    episodes, records = [], []
+    summary = evaluate(env, policy, goals, episodes.append, records.append, action_names=names,
+                       flip_actions=flip_actions(actions))
     env.close()
     made = [sum(a["name"].startswith("flip") and a["outcome"] == "done"
-                for a in actions if a["episode"] == k) for k in range(2)]
+                for a in records if a["episode"] == k) for k in range(2)]
     assert [e["n_flips"] for e in episodes] == made
     assert made[0] >= 1 and made[1] == 0
     assert (summary["flipped"], summary["flipped_success"]) == (1, 0)

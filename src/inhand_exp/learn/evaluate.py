@@ -5,14 +5,15 @@ The environment is a batch of ``n`` primitive environments built on the same goa
 is the goal's index and the results do not depend on how the batch runs. Each episode yields one
 record (the ``/eval/episode`` fields), each action one ``/episode/action`` record and, when the
 environment records them, the ``/sim/state`` snapshots; the summary has the success, drop and
-timeout rates and the mean simulated time of the successful episodes. With the action names,
-an episode also counts its flips (``n_flips``: flips, or the cube's lands, that ended
-``done``), so that the pairs that need one show how often the policy made one.
+timeout rates and the mean simulated time of the successful episodes. Given the indices of
+the flipping actions (``task.actions.flip_actions``), an episode also counts its flips
+(``n_flips``: flips, or the cube's lands, that ended ``done``), so that the pairs that need one
+show how often the policy made one.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -30,18 +31,14 @@ Sink = Callable[[Record], None]
 DONE = OUTCOMES.index("done")
 
 
-def is_flip(name: str) -> bool:
-    """Whether the action named ``name`` moves a finger to another face: a flip, or the land
-    that ends the cube's release-and-land."""
-    return name.startswith(("flip", "land"))
-
-
 def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
              on_episode: Sink | None = None, on_action: Sink | None = None,
              on_state: Sink | None = None, action_names: Sequence[str] | None = None,
-             sample: bool = False) -> dict[str, float]:
+             sample: bool = False,
+             flip_actions: Collection[int] | None = None) -> dict[str, float]:
     """Play every pair of ``goals`` once with the policy's most likely actions (``sample``:
-    actions drawn from it, with torch's global generator); summarise.
+    actions drawn from it, with torch's global generator); summarise. ``flip_actions``: the
+    indices whose finished runs each episode counts (``n_flips``); None: no count.
 
     The batch runs in this process's policy call, so the draws do not depend on the backend.
     """
@@ -50,8 +47,6 @@ def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
     played = np.zeros(n, dtype=int)  # finished episodes of each environment
     steps, invalid = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
     flips = np.zeros(n, dtype=int)
-    flip_actions = None if action_names is None else {
-        k for k, name in enumerate(action_names) if is_flip(name)}
     records: list[Record] = []
     mode = ExplorationType.RANDOM if sample else ExplorationType.DETERMINISTIC
     with set_exploration_type(mode), torch.no_grad():

@@ -55,6 +55,12 @@ def action_table(prim) -> tuple[Action, ...]:
     return tuple(Action(index=k, **spec) for k, spec in enumerate(specs))
 
 
+def flip_actions(actions: tuple[Action, ...]) -> frozenset[int]:
+    """The indices of the actions that move a finger to another face: the flips, and the lands
+    that end the cube's release-and-land."""
+    return frozenset(a.index for a in actions if a.kind in ("flip", "land"))
+
+
 def make_primitive(action: Action, model: HandModel, contacts: Contacts,
                    prim: PrimitivesConfig) -> Primitive:
     """A fresh primitive carrying out ``action`` from ``contacts``, with the durations, gains and

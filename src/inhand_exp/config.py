@@ -256,6 +256,9 @@ class TaskConfig:
     reward_goal: float = spec(5.0, "Reward on reaching the goal.")
     reward_invalid: float = spec(-0.01, "Reward of an infeasible action (penalty mode).")
     reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")
+    reward_flip_needed: bool = spec(False, "Pay reward_flip only in episodes whose pair needs a "
+                                    "flip (its needs_flip); false: for every useful flip, as "
+                                    "the paper.")
     reward_progress: float = spec(0.0, "Shaping: reward per tolerance (1 cm, 0.1 rad) of "
                                   "progress towards the goal; 0 is the paper's reward.")
     reward_route: float = spec(0.0, "Shaping: reward per second of the search graph's "

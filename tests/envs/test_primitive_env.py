@@ -88,16 +88,19 @@ def test_same_seed_same_rollout(compose_cfg):
     assert torch.equal(run(), run())
 
 
-@pytest.mark.parametrize(("angle", "seen_before", "paid"), [
-    (0.6, False, 1.0),   # the flipped finger pushes the pole towards the goal angle
-    (-0.6, False, 0.0),  # ... away from it
-    (0.6, True, 0.0),    # useful, but the posture was already reached in this episode
+@pytest.mark.parametrize(("angle", "seen_before", "needed", "paid"), [
+    (0.6, False, None, 1.0),   # the flipped finger pushes the pole towards the goal angle
+    (-0.6, False, None, 0.0),  # ... away from it
+    (0.6, True, None, 0.0),    # useful, but the posture was already reached in this episode
+    (0.6, False, True, 1.0),   # task.reward_flip_needed: the pair needs a flip
+    (0.6, False, False, 0.0),  # ... it does not
 ])
 def test_flip_reward_is_paid_for_useful_flips_to_new_postures(compose_cfg, angle, seen_before,
-                                                              paid):
+                                                              needed, paid):
     start = Contacts(Posture((L, R, R)), (-0.21, -0.205, -0.15))
-    pair = GoalPair("hard", XF.copy(), XF + np.array([0.0, 0.0, angle]), start)
-    env = PrimitiveEnv(compose_cfg(), goals=[pair], seed=0)
+    pair = GoalPair("hard", XF.copy(), XF + np.array([0.0, 0.0, angle]), start, bool(needed))
+    overrides = () if needed is None else ("task.reward_flip_needed=true",)
+    env = PrimitiveEnv(compose_cfg(*overrides), goals=[pair], seed=0)
     td = env.reset()
     if seen_before:
         env.postures.add(Posture((L, R, L)))

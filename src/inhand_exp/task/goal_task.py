@@ -164,7 +164,8 @@ class GoalTask:
         """Score one action that took ``sim_time_s`` and ended with ``dropped`` (the object no
         longer held, as the simulator says). Success is read from the simulated pose.
         ``before``: ``to_go`` before the action, for the progress shaping; ``route_before``:
-        ``route_to_go`` before it, for the route shaping (none on a drop: the grasp is gone)."""
+        ``route_to_go`` before it, for the route shaping (none on a drop: the grasp is gone).
+        With ``task.reward_flip_needed``, a useful flip is paid only where the pair needs one."""
         self.n_actions += 1
         self.n_invalid += not valid
         self.sim_time += sim_time_s
@@ -178,6 +179,8 @@ class GoalTask:
         route = 0.0  # the goal's potential is 0; a drop pays none (its contacts mean nothing)
         if route_before is not None and not self.dropped:
             route = route_before - (0.0 if self.success else self.route_to_go())
+        if self.rules.reward_flip_needed and not (self.pair is not None and self.pair.needs_flip):
+            useful_flip = False
         r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful_flip,
                    progress=progress, route=route)
         return Verdict(self.success, self.dropped, terminated, not terminated and out_of_time, r)

@@ -179,7 +179,7 @@ class GoalTask:
         route = 0.0  # the goal's potential is 0; a drop pays none (its contacts mean nothing)
         if route_before is not None and not self.dropped:
             route = route_before - (0.0 if self.success else self.route_to_go())
-        if self.rules.reward_flip_needed and not (self.pair is not None and self.pair.needs_flip):
+        if useful_flip and self.rules.reward_flip_needed and not self.pair.needs_flip:
             useful_flip = False
         r = reward(self.rules, valid=valid, success=self.success, useful_flip=useful_flip,
                    progress=progress, route=route)

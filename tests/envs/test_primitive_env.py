@@ -227,3 +227,20 @@ def test_the_world_refuses_a_nan_torque_and_clips_an_absurd_one(compose_cfg):
     env.world.step(np.full(6, 1e12))  # clipped to hand.max_torque_nm: a physical command
     pose, twist = env.world.object_state()
     assert np.isfinite(pose).all() and np.isfinite(twist).all()
+
+
+def test_no_undo_refuses_the_opposite_of_the_last_action_only(compose_cfg):
+    names = lambda env, mask: {a.name for a in env.actions if mask[a.index]}  # noqa: E731
+    envs = [PrimitiveEnv(compose_cfg(*o), goals=one_pair(0.05), seed=0)
+            for o in ([], ["task.no_undo=true"])]
+    allowed = []
+    for env in envs:
+        td = env.reset()
+        plus_x = next(a.index for a in env.actions if a.name == "repose +x")
+        assert td["action_mask"][plus_x]
+        td = env.step(td.set("action", torch.tensor(plus_x)))["next"]
+        assert OUTCOMES[td["outcome"].item()] == "done"
+        allowed.append(names(env, td["action_mask"]))
+    assert "repose -x" in allowed[0]
+    assert allowed[1] == allowed[0] - {"repose -x"}
+    assert envs[1].reset()["action_mask"].tolist() == envs[0].reset()["action_mask"].tolist()

@@ -10,7 +10,7 @@ from inhand_exp.control.grasp import Contacts, Face, Posture
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import random_grasp
 from inhand_exp.sim.world import ObjectSpec, World
-from inhand_exp.task.actions import action_table, feasibility, make_primitive
+from inhand_exp.task.actions import action_table, feasibility, make_primitive, undo_actions
 
 
 def test_pole_table_is_the_papers_fourteen(compose_cfg):
@@ -104,3 +104,14 @@ def test_mask_agrees_with_execution(pole_setup, seed):
             out = execute(world, make_primitive(allowed[0], model, contacts, cfg.primitives))
             assert out.steps > 0 and out.reason != "infeasible", (allowed[0].name, out)
             contacts = model.measured(contacts, world.object_pose(), world.joint_q())
+
+
+def test_each_repose_and_slide_is_undone_by_its_opposite(compose_cfg):
+    actions = action_table(compose_cfg().primitives)
+    undo = undo_actions(actions)
+    names = {a.index: a.name for a in actions}
+    pairs = {names[a.index]: names[u] for a, u in zip(actions, undo, strict=True) if u is not None}
+    assert pairs["repose +x"] == "repose -x" and pairs["repose -theta"] == "repose +theta"
+    assert pairs["slide finger 1 +"] == "slide finger 1 -"
+    assert len(pairs) == 12  # 6 reposes and 6 slides; flips have none
+    assert all(undo[u] == a.index for a, u in zip(actions, undo, strict=True) if u is not None)

@@ -30,7 +30,7 @@ from torchrl.envs import EnvBase
 from inhand_exp.control.execute import REASONS, execute
 from inhand_exp.envs.snapshots import STATE_WIDTH, Snapshots
 from inhand_exp.envs.specs import declare_mid_level_specs, idle_output
-from inhand_exp.task.actions import action_table, feasibility, make_primitive
+from inhand_exp.task.actions import action_table, feasibility, make_primitive, undo_actions
 from inhand_exp.task.goal_task import GoalTask
 from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.rules import flip_useful
@@ -62,6 +62,9 @@ class PrimitiveEnv(EnvBase):
         self.filter = str(scene.rules.filter)
         self.noisy = bool(scene.noise.any())
         self.actions = action_table(self.prim)
+        # with task.no_undo: the action that would undo the last one carried out, refused
+        self.undoes = undo_actions(self.actions) if scene.rules.no_undo else None
+        self.undo: int | None = None
         self.idle, self.last = False, None
         self.snapshots = None
         if states_hz > 0:
@@ -91,6 +94,8 @@ class PrimitiveEnv(EnvBase):
         self.mask, self.planned = feasibility(self.actions, self.model, self.contacts,
                                               self.prim, obs)
         self.wall[0] += time.perf_counter() - t
+        if self.undo is not None and self.mask[self.undo] and self.mask.sum() > 1:
+            self.mask[self.undo] = False  # task.no_undo: not straight back
         mask = self.mask if self.filter == "mask" else np.ones_like(self.mask)
         task = self.task
         vec = np.concatenate([obs.q, obs.qd, obs.pose, task.goal]).astype(np.float32)
@@ -132,6 +137,7 @@ class PrimitiveEnv(EnvBase):
         pair = self.task.pair
         self.contacts = pair.contacts
         self.postures = {pair.contacts.posture}  # reached so far in this episode
+        self.undo = None
         if self.snapshots is not None:
             self.snapshots.new_episode()
         false = False
@@ -163,6 +169,8 @@ class PrimitiveEnv(EnvBase):
             self.wall[1] += time.perf_counter() - t
             sim_time = out.sim_time_s
             valid, outcome = out.reason != "infeasible", out.reason
+            if self.undoes is not None:
+                self.undo = self.undoes[a] if out.ok else None
             dropped = out.dropped  # from the simulated state, whatever the primitive says
             if out.reached and action.kind in ("flip", "release", "land"):
                 self.contacts = prim.result

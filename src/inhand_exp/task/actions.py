@@ -61,6 +61,19 @@ def flip_actions(actions: tuple[Action, ...]) -> frozenset[int]:
     return frozenset(a.index for a in actions if a.kind in ("flip", "land"))
 
 
+def undo_actions(actions: tuple[Action, ...]) -> tuple[int | None, ...]:
+    """For each action, the index of the one that undoes it (the opposite repose, the same
+    finger's slide back), or None (flips, releases and lands)."""
+    def undoes(a: Action, b: Action) -> bool:
+        if a.kind != b.kind or a.kind not in ("repose", "slide"):
+            return False
+        if a.kind == "repose":
+            return all(x == -y for x, y in zip(a.delta, b.delta, strict=True))
+        return a.finger == b.finger and a.dc == -b.dc
+
+    return tuple(next((b.index for b in actions if undoes(a, b)), None) for a in actions)
+
+
 def make_primitive(action: Action, model: HandModel, contacts: Contacts,
                    prim: PrimitivesConfig) -> Primitive:
     """A fresh primitive carrying out ``action`` from ``contacts``, with the durations, gains and

@@ -268,6 +268,11 @@ class TaskConfig:
                                "shortest route to the goal that an action saves (task/route.py; "
                                "the graph of learner=search at its default resolution, kept in "
                                "route_cache_dir); 0 is the paper's reward.", ge=0)
+    route_advice: bool = spec(False, "Append the search graph's view of the state to the "
+                              "policy's observation: the route time to the goal and, per "
+                              "action, how much longer the route is by that action "
+                              "(task/route.py RouteAdvice; the graph of route_cache_dir). "
+                              "false: the paper's observation.")
     route_cap_s: float = spec(40.0, "Route times longer than this, and states with no route, "
                               "count as this long (s).", gt=0)
     route_cache_dir: str = spec("logs/cache", "Where the route shaping's graph is kept "

@@ -4,7 +4,9 @@ Clocks: the policy acts once per primitive; the primitive's torque law runs ever
 (``sim.timestep_s`` x ``sim.control_substeps``) for the primitive's duration, or until it has
 settled (``primitives.settle_early``). Observation (paper IV-A): joint angles and
 velocities (12), the observed object pose ``X_t`` (3, with uniform noise under ``noise=paper``)
-and the goal ``X_g`` (3); ``action_mask`` says which actions the feasibility filter allows.
+and the goal ``X_g`` (3), then with ``task.route_advice`` the search graph's view of the
+observed state (``task.route.RouteAdvice``, 15 floats); ``action_mask`` says which actions the
+feasibility filter allows (with ``task.no_undo``, not the one that undoes the last).
 ``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
 with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
 into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made, the wall
@@ -27,12 +29,15 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Binary, Categorical, Unbounded
 from torchrl.envs import EnvBase
 
+from inhand_exp.config import SearchConfig
 from inhand_exp.control.execute import REASONS, execute
 from inhand_exp.envs.snapshots import STATE_WIDTH, Snapshots
-from inhand_exp.envs.specs import declare_mid_level_specs, idle_output
+from inhand_exp.envs.specs import OBS_DIM, declare_mid_level_specs, idle_output
 from inhand_exp.task.actions import action_table, feasibility, make_primitive, undo_actions
 from inhand_exp.task.goal_task import GoalTask
 from inhand_exp.task.goals import GoalPair
+from inhand_exp.task.graph import cached_graph
+from inhand_exp.task.route import RouteAdvice
 from inhand_exp.task.rules import flip_useful
 from inhand_exp.task.scene import build_scene
 
@@ -71,7 +76,12 @@ class PrimitiveEnv(EnvBase):
             longest = max(getattr(self.prim, k) for k in vars(self.prim)
                           if k.endswith("_duration_s"))
             self.snapshots = Snapshots(self.world, states_hz, longest)
-        declare_mid_level_specs(self, len(self.actions))
+        self.advice = None  # task.route_advice: the search graph's view, in the observation
+        if scene.rules.route_advice:
+            graph = cached_graph(cfg, SearchConfig(cache_dir=scene.rules.route_cache_dir))
+            self.advice = RouteAdvice(graph, self.model, self.actions, scene.rules.route_cap_s)
+        extra = 0 if self.advice is None else self.advice.size
+        declare_mid_level_specs(self, len(self.actions), OBS_DIM + extra)
         self.observation_spec["pose"] = Unbounded(shape=(3,), dtype=torch.float32)
         self.observation_spec["valid"] = Binary(n=1, dtype=torch.bool)
         self.observation_spec["outcome"] = Categorical(len(OUTCOMES), shape=(1,))
@@ -98,7 +108,10 @@ class PrimitiveEnv(EnvBase):
             self.mask[self.undo] = False  # task.no_undo: not straight back
         mask = self.mask if self.filter == "mask" else np.ones_like(self.mask)
         task = self.task
-        vec = np.concatenate([obs.q, obs.qd, obs.pose, task.goal]).astype(np.float32)
+        parts = [obs.q, obs.qd, obs.pose, task.goal]
+        if self.advice is not None:  # read from the observed state, as the search reads it
+            parts.append(self.advice(obs.q, obs.pose, task.goal))
+        vec = np.concatenate(parts).astype(np.float32)
         stuck = self.filter == "mask" and not mask.any()
         flags = {k: torch.tensor([v]) for k, v in done.items()}
         if stuck:

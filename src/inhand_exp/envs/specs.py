@@ -7,14 +7,26 @@ from tensordict import TensorDictBase
 from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from inhand_exp.task.actions import action_table
+
 OBS_DIM = 18  # q (6), qd (6), X_t (3), X_g (3)
 
 
-def declare_mid_level_specs(env: EnvBase, n_actions: int) -> None:
-    """Observation (``observation``, ``action_mask``, ``success``, ``dropped``, ``sim_time_s``),
-    a categorical action over ``n_actions``, a scalar reward and done/terminated/truncated."""
+def advice_size(cfg) -> int:
+    """Floats ``task.route_advice`` appends to the observation (``task.route.RouteAdvice``):
+    the route time, and one per mid-level action; 0 without it."""
+    task = cfg["task"]
+    if not bool(task.get("route_advice", False)):
+        return 0
+    return 1 + len(action_table(cfg["primitives"]))
+
+
+def declare_mid_level_specs(env: EnvBase, n_actions: int, obs_dim: int = OBS_DIM) -> None:
+    """Observation (``observation`` of ``obs_dim`` floats, ``action_mask``, ``success``,
+    ``dropped``, ``sim_time_s``), a categorical action over ``n_actions``, a scalar reward and
+    done/terminated/truncated."""
     env.observation_spec = Composite(
-        observation=Unbounded(shape=(OBS_DIM,), dtype=torch.float32),
+        observation=Unbounded(shape=(obs_dim,), dtype=torch.float32),
         action_mask=Binary(n=n_actions, dtype=torch.bool),
         success=Binary(n=1, dtype=torch.bool),
         dropped=Binary(n=1, dtype=torch.bool),

@@ -24,7 +24,7 @@ from torchrl.objectives.value import GAE
 
 from inhand_exp.config import PPOConfig, typed
 from inhand_exp.envs.primitive_env import PrimitiveEnv
-from inhand_exp.envs.specs import OBS_DIM
+from inhand_exp.envs.specs import OBS_DIM, advice_size
 from inhand_exp.learn.checkpoint import (
     CheckpointError,
     read_checkpoint,
@@ -74,7 +74,7 @@ def from_config(cfg) -> PPO:
     """The mid-level PPO learner of ``cfg`` (the ``learner.ppo`` entry of the registry)."""
     params = typed(cfg.learner, PPOConfig)
     hand = HandGeometry.from_config(cfg.hand) if params.grasp_features else None
-    return PPO(OBS_DIM, len(action_table(cfg.primitives)), params, hand)
+    return PPO(OBS_DIM + advice_size(cfg), len(action_table(cfg.primitives)), params, hand)
 
 
 class PPO:

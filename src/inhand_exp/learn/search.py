@@ -38,14 +38,13 @@ import torch
 from torchrl.envs import EnvBase
 
 from inhand_exp.config import PrimitivesConfig, SearchConfig, TaskConfig, typed
-from inhand_exp.control.grasp import Contacts, Posture
+from inhand_exp.control.grasp import Contacts
 from inhand_exp.control.hand import HandModel
 from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.learn.checkpoint import read_checkpoint, save_checkpoint, stamped, trained_with
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import Action, action_table
 from inhand_exp.task.graph import (
-    SIDES,
     PoseGraph,
     cached_graph,
     contacts_of,
@@ -180,30 +179,7 @@ class SearchPolicy:
 
     def successors(self, cell: tuple, a: Action) -> list[tuple]:
         """The cells action ``a`` leads to from ``cell`` along one edge."""
-        g, c = self.graph, list(cell)
-        P, K = len(g.postures), len(g.lattice.cs)
-        dims = (P, K, K, K, *g.ids.shape[4:])
-        if a.kind == "repose":
-            axis = int(np.argmax(np.abs(a.delta)))
-            c[4 + axis] += 1 if a.delta[axis] > 0 else -1
-            out = [tuple(c)]
-        elif a.kind == "slide":
-            c[1 + a.finger] += 1 if a.dc > 0 else -1
-            out = [tuple(c)]
-        elif a.kind == "flip":
-            faces = list(g.postures[c[0]].faces)
-            faces[a.finger] = SIDES[1 - SIDES.index(faces[a.finger])]
-            other = Posture(tuple(faces))
-            if other not in g.postures:
-                return []
-            out = []
-            for k in range(K):
-                c2 = list(c)
-                c2[0], c2[1 + a.finger] = g.postures.index(other), k
-                out.append(tuple(c2))
-        else:
-            return []
-        return [t for t in out if all(0 <= v < n for v, n in zip(t, dims, strict=True))]
+        return self.graph.successors(cell, a)
 
     def act(self, i: int, obs: np.ndarray, mask: np.ndarray) -> int:
         q, pose, goal = obs[:6], obs[12:15], obs[15:18]

@@ -338,6 +338,35 @@ class PoseGraph:
         """The edges turned round (row v holds the edges into v), built once."""
         return self.matrix.T.tocsr()
 
+    def successors(self, cell: tuple, action) -> list[tuple]:
+        """The cells a mid-level ``action`` (``task.actions.Action``) leads to from ``cell``
+        along one edge: a repose or a slide one cell along its axis, a flip to every contact
+        cell of the finger on the other face (the cells off the lattice left out)."""
+        c = list(cell)
+        K = len(self.lattice.cs)
+        if action.kind == "repose":
+            axis = int(np.argmax(np.abs(action.delta)))
+            c[4 + axis] += 1 if action.delta[axis] > 0 else -1
+            out = [tuple(c)]
+        elif action.kind == "slide":
+            c[1 + action.finger] += 1 if action.dc > 0 else -1
+            out = [tuple(c)]
+        elif action.kind == "flip":
+            faces = list(self.postures[c[0]].faces)
+            faces[action.finger] = SIDES[1 - SIDES.index(faces[action.finger])]
+            other = Posture(tuple(faces))
+            if other not in self.postures:
+                return []
+            out = []
+            for k in range(K):
+                c2 = list(c)
+                c2[0], c2[1 + action.finger] = self.postures.index(other), k
+                out.append(tuple(c2))
+        else:
+            return []
+        dims = self.ids.shape
+        return [t for t in out if all(0 <= v < n for v, n in zip(t, dims, strict=True))]
+
     def weight(self, u: int, v: int) -> float:
         """The time of the edge from node ``u`` to node ``v`` (inf where there is none)."""
         m = self.matrix

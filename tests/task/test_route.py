@@ -148,5 +148,5 @@ def test_route_advice_extends_the_observation_and_a_policy_for_the_other_size_is
     assert sizes == [18, 18 + 1 + 14]
     path = tmp_path / "plain.pt"
     ppo.from_config(plain).save(path)
-    with pytest.raises(CheckpointError, match="18 observations"):
+    with pytest.raises(CheckpointError, match="18 observations.*task.route_advice=true adds 15"):
         ppo.from_config(advised).load(path)

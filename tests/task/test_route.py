@@ -10,9 +10,9 @@ import torch
 from inhand_exp.config import SearchConfig
 from inhand_exp.control.grasp import Contacts
 from inhand_exp.envs.primitive_env import PrimitiveEnv
+from inhand_exp.task.actions import action_table
 from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.graph import cached_graph
-from inhand_exp.task.actions import action_table
 from inhand_exp.task.route import ADVICE_SCALE_S, RouteAdvice, RouteTime
 
 # the search tests' TINY workspace: the pole held high enough to flip

@@ -253,9 +253,10 @@ class SearchConfig(LearnerConfig):
 @dataclass
 class TaskConfig:
     filter: FilterMode = spec(FilterMode.mask, "Feasibility filter: mask, penalty (paper), off.")
-    no_undo: bool = spec(False, "With filter=mask, also refuse the action that would undo the "
-                         "last one carried out (the opposite repose, the same finger's slide "
-                         "back), unless no other action is allowed.")
+    no_undo: bool = spec(False, "The feasibility filter also refuses the action that would "
+                         "undo the last one carried out (the opposite repose, the same finger's "
+                         "slide back), unless no other action is allowed; false: the paper's "
+                         "filter.")
     reward_goal: float = spec(5.0, "Reward on reaching the goal.")
     reward_invalid: float = spec(-0.01, "Reward of an infeasible action (penalty mode).")
     reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")

@@ -41,16 +41,21 @@ class RouteTime:
         self.graph, self.model, self.cap_s = graph, model, cap_s
 
     def __call__(self, q: np.ndarray, pose: np.ndarray, goal: np.ndarray) -> float:
-        g = self.graph
-        cell = g.cell(contacts_of(self.model, q, pose), pose, self.model.shape.half_z)
-        if cell is None:
-            return self.cap_s
-        here = int(g.ids[cell])
-        nodes = np.array([here]) if here >= 0 else g.near(cell)
-        if nodes.size == 0:
-            return self.cap_s
-        return float(min(self.cap_s, g.to_goal(goal)[nodes].min()))
+        return min(self.cap_s, state_route(self.graph, self.model, q, pose, goal)[3])
 
+
+def state_route(g: PoseGraph, model: HandModel, q: np.ndarray, pose: np.ndarray,
+                goal: np.ndarray) -> tuple[tuple | None, int, np.ndarray | None, float]:
+    """The state's cell (None off the lattice), its node (-1: none), the distances to the
+    goal's cell and the state's route time (inf: no route): the node's distance or, where the
+    cell holds no node, the best of the nearest nodes' (``PoseGraph.near``)."""
+    cell = g.cell(contacts_of(model, q, pose), pose, model.shape.half_z)
+    if cell is None:
+        return None, -1, None, math.inf
+    d = g.to_goal(goal)
+    here = int(g.ids[cell])
+    nodes = np.array([here]) if here >= 0 else g.near(cell)
+    return cell, here, d, float(d[nodes].min()) if nodes.size else math.inf
 
 ADVICE_SCALE_S = 2.0  # route seconds per unit of an action's advice (two edges of reposes)
 
@@ -79,13 +84,7 @@ class RouteAdvice:
 
     def __call__(self, q: np.ndarray, pose: np.ndarray, goal: np.ndarray) -> np.ndarray:
         g, out = self.graph, np.ones(self.size)
-        cell = g.cell(contacts_of(self.model, q, pose), pose, self.model.shape.half_z)
-        if cell is None:
-            return out
-        d = g.to_goal(goal)
-        here = int(g.ids[cell])
-        nodes = np.array([here]) if here >= 0 else g.near(cell)
-        now = float(d[nodes].min()) if nodes.size else math.inf
+        cell, here, d, now = state_route(g, self.model, q, pose, goal)
         if not math.isfinite(now):
             return out
         out[0] = min(now, self.cap_s) / self.cap_s

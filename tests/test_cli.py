@@ -184,7 +184,7 @@ def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path)
     from inhand_exp.analysis.frames import load
     from inhand_exp.runinfo import merged
 
-    train = inhand_exp("mode=train", "task.reward_progress=0.1",
+    train = inhand_exp("mode=train", "task.reward_progress=0.1", "task.no_undo=true",
                        f"hydra.run.dir={tmp_path / 'train'}", cwd=tmp_path)
     assert train.returncode == 0, train.stderr
     trained = run_config(tmp_path / "train" / "run.mcap")
@@ -201,6 +201,9 @@ def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path)
     assert ev.returncode == 0, ev.stderr
     assert run_config(tmp_path / "ev" / "run.mcap")["policy_overrides"] == \
         trained["policy_overrides"]
+    # evaluated without the filter it learned with, and told so
+    assert "trained with task.no_undo=true (here: false)" in ev.stdout
+    assert "reward_progress" not in ev.stdout.split("note:")[1].splitlines()[0]
     assert more.returncode == 0, more.stderr
     longer = run_config(tmp_path / "more" / "run.mcap")["policy_overrides"]
     assert "task.reward_progress=0.2" in longer and "task.reward_progress=0.1" not in longer

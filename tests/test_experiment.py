@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from inhand_exp.experiment import paper_row, policy_key, table
+from inhand_exp.runinfo import unlike_training
 
 SUMMARY = {"episodes": 500, "success_rate": 0.952, "drop_rate": 0.012, "timeout_rate": 0.036,
            "avg_time_s": 5.71}
@@ -56,3 +57,15 @@ def test_the_flagged_rows_say_how_many_episodes_flipped(compose_cfg):
     assert rows[-1] == "flipped in 86 of the 500 episodes, 57 of them solved"
     older = {k: v for k, v in counted.items() if "flipped" not in k}  # no counts: no mention
     assert "flipped" not in table(older, compose_cfg("goals=hard"), sampled=False)
+
+
+def test_an_evaluation_names_the_task_settings_its_policy_was_trained_with_otherwise(
+        compose_cfg):
+    trained = ["task.no_undo=true", "task.filter=mask", "task.reward_progress=0.1",
+               "task.max_actions=200", "task.success_tol_m=0.010", "seed=3",
+               "'goals.train_groups=[easy,medium,hard]'"]
+    # rewards, other groups and values equal as numbers are not differences
+    assert unlike_training(compose_cfg(), trained) == ["task.no_undo=true (here: false)"]
+    assert unlike_training(compose_cfg("task.no_undo=true", "task.filter=penalty"), trained) \
+        == ["task.filter=mask (here: penalty)"]
+    assert unlike_training(compose_cfg(), None) == []

@@ -30,7 +30,7 @@ from inhand_exp.learn.registry import Learner, make_learner
 from inhand_exp.progress import ProgressBar
 from inhand_exp.record import RunLog
 from inhand_exp.record.scene import SceneGeometry, SceneReplay
-from inhand_exp.runinfo import merged
+from inhand_exp.runinfo import merged, unlike_training
 from inhand_exp.task.actions import action_table, flip_actions
 from inhand_exp.task.goals import (
     GoalPair,
@@ -128,8 +128,18 @@ def run_job(cfg: DictConfig, run_dir: Path, log: RunLog, job: Job | None = None,
         else:
             _train(cfg, learner, job.target, run_dir, log, say)
     if job.mode in ("eval", "train_eval"):
+        if job.mode == "eval":
+            _note_unlike_training(cfg, learner, say)
         return _evaluate(cfg, learner, run_dir, log, say, job.goals)
     return None
+
+
+def _note_unlike_training(cfg, learner: Learner, say) -> None:
+    """Say which task settings of the policy's training this evaluation does not use."""
+    unlike = unlike_training(cfg, learner.trained_with)
+    if unlike:
+        say(f"note: the policy was trained with {', '.join(unlike)}; add the same overrides "
+            f"to evaluate it as it was trained")
 
 
 # Goal settings that shape only the test set. They stay out of a policy's store key, so that
@@ -257,6 +267,7 @@ def _demo(cfg, learner: Learner, run_dir: Path, log: RunLog, say) -> dict[str, f
         f"each goal group ({', '.join(DEMO_GROUPS)}). The README's Table II uses 500 pairs "
         f"per group. To train a policy of your own instead: inhand-exp mode=train_eval "
         f"train.frames=163840 'goals.train_groups=[easy,medium,hard]' task.reward_progress=0.1")
+    _note_unlike_training(cfg, learner, say)
     out = {}
     for group in DEMO_GROUPS:
         sub = cfg.copy()

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import datetime as dt
+import enum
 import importlib.metadata
+import math
 import platform
 import subprocess
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
+import yaml
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"  # the app's config tree
 PACKAGES = ("inhand-exp", "torch", "torchrl", "tensordict", "pybullet", "hydra-core",
@@ -68,3 +71,41 @@ def merged(first: Iterable[str], then: Iterable[str]) -> list[str]:
     for o in (*first, *then):
         out[o.split("=", 1)[0].lstrip("+~")] = o
     return list(out.values())
+
+
+def _plain(value: Any) -> Any:
+    """A config value as plain Python (an enum by its value, containers as lists and dicts)."""
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, DictConfig | ListConfig):
+        return OmegaConf.to_container(value, resolve=True, enum_to_str=True)
+    return value
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, int | float) and isinstance(b, int | float) and not isinstance(a, bool):
+        return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
+    return a == b or str(a) == str(b)
+
+
+def unlike_training(cfg: DictConfig, policy_overrides: Iterable[str] | None) -> list[str]:
+    """The task settings a policy was trained with (``policy_overrides``, its ``trained_with``)
+    that ``cfg`` does not use, each as ``key=trained (here: now)``. Rewards are left out: they
+    do not change what the policy sees or may do. Evaluated otherwise, a policy meets a filter,
+    a time limit or an observation it did not learn with."""
+    unlike = []
+    for override in policy_overrides or ():
+        key, sep, text = override.partition("=")
+        key = key.lstrip("+~")
+        if not sep or not key.startswith("task.") or key.startswith("task.reward_") \
+                or key == "task.route_cache_dir":
+            continue
+        try:
+            trained = yaml.safe_load(text)
+        except yaml.YAMLError:
+            trained = text
+        now = _plain(OmegaConf.select(cfg, key, default=None))
+        if not _same(trained, now):
+            shown = str(now).lower() if isinstance(now, bool) else now
+            unlike.append(f"{key}={text} (here: {shown})")
+    return unlike

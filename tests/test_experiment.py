@@ -1,4 +1,5 @@
-"""The evaluation table printed at the end of a run, beside the paper's numbers."""
+"""What a run prints: the evaluation table beside the paper's numbers, and the note naming the
+policy's training settings that an evaluation does not use."""
 
 from __future__ import annotations
 

@@ -57,6 +57,7 @@ def state_route(g: PoseGraph, model: HandModel, q: np.ndarray, pose: np.ndarray,
     nodes = np.array([here]) if here >= 0 else g.near(cell)
     return cell, here, d, float(d[nodes].min()) if nodes.size else math.inf
 
+
 ADVICE_SCALE_S = 2.0  # route seconds per unit of an action's advice (two edges of reposes)
 
 

@@ -26,7 +26,7 @@ from inhand_exp.control.execute import Observation, Outcome, execute
 from inhand_exp.control.flip import Flip
 from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.repose import GraspPlan, Repose, strict_hold
+from inhand_exp.control.repose import GraspPlan, Repose, rolled_levers, strict_hold
 from inhand_exp.control.slide import Slide
 from inhand_exp.sim.world import World
 
@@ -275,6 +275,72 @@ def test_a_slide_may_not_end_in_a_weak_grasp(nominal_model, make_world):
             assert out.reason == "infeasible" and "firmly" in out.detail, out
         else:
             assert out.reason == "done", out
+
+
+# a grasp a medium episode reposed towards a pinch (tips nearly level across the pole)
+NEAR_WEAK = Contacts(Posture((L, R, R)), (-0.1217, -0.13, -0.2313))
+NEAR_WEAK_POSE = np.array([0.0, 0.296, 0.29])
+
+
+def measured_levers(model: HandModel, contacts: Contacts, world: World) -> np.ndarray:
+    obs = observe(world)
+    return GraspPlan.from_state(model, contacts, obs.pose, obs.q, PrimitivesConfig()).levers_O
+
+
+@pytest.mark.parametrize("delta", UNIT_REPOSES, ids=REPOSE_IDS)
+def test_a_repose_rolls_the_tips_as_predicted(nominal_model, make_world, delta):
+    """A fingertip is a ball on a 2-joint finger, which cannot keep the ball's angle: moving
+    the pole turns each ball against it, and the ball rolls along the face. ``rolled_levers``
+    says where the contacts end up: from the joints the repose ended at, within 0.1 mm of
+    the simulated contacts (the tips do not slip); from those it planned for the target, within
+    half a millimetre when it gets there (it stops within its tolerance of the target; in the
+    nearly weak grasp a turn is still on its way at the end). A turn of the pole moves some
+    contacts by over a millimetre."""
+    for contacts, pose in ((BEND, X0), (NEAR_WEAK, NEAR_WEAK_POSE)):
+        world = make_world(contacts, pose)
+        q0 = observe(world).q
+        before = measured_levers(nominal_model, contacts, world)
+        prim = Repose(nominal_model, contacts, delta, REPOSE_S,
+                      PrimitivesConfig(min_grasp_margin=0.0))  # carried out, weak or not
+        out = execute(world, prim, settle_early=False)
+        assert out.reason in ("done", "timeout") and touching(world) == {0, 1, 2}, out
+        predicted = rolled_levers(nominal_model, prim.plan, q0, prim.q_end, float(delta[2]))
+        end = observe(world)
+        rolled = rolled_levers(nominal_model, prim.plan, q0,
+                               {i: end.q[2 * i:2 * i + 2] for i in range(3)},
+                               float(end.pose[2] - pose[2]))
+        after = measured_levers(nominal_model, contacts, world)
+        along = prim.plan.normals_O[:, ::-1] * [-1.0, 1.0]  # each face's tangent
+        rolling, planned, moved = (((a - b) * along).sum(1) for a, b in (
+            (rolled, after), (predicted, after), (after, before)))
+        assert np.abs(rolling).max() < 1e-4, rolling
+        if out.reason == "done":
+            assert np.abs(planned).max() < 5e-4, planned
+        if delta[2]:
+            assert np.abs(moved).max() > 1e-3, moved
+
+
+def test_a_repose_that_would_roll_the_grasp_weak_is_refused(nominal_model, make_world):
+    """Turning the pole further rolls the tips towards a pinch whose slack is under the
+    margin: a grasp no primitive may move again. The repose is refused, nothing moves; carried
+    out without the check (no margin), it does end in such a grasp."""
+    gains = PrimitivesConfig()
+    turn = np.array([0.0, 0.0, 0.1])
+    assert margin_of(nominal_model, NEAR_WEAK) > gains.min_grasp_margin
+    world = make_world(NEAR_WEAK, NEAR_WEAK_POSE)
+    before = snapshot(world)
+    out = execute(world, Repose(nominal_model, NEAR_WEAK, turn, REPOSE_S, gains))
+    assert out.reason == "infeasible" and "roll" in out.detail, out
+    assert_untouched(world, before, out)
+    world = make_world(NEAR_WEAK, NEAR_WEAK_POSE)
+    out = execute(world, Repose(nominal_model, NEAR_WEAK, turn, REPOSE_S,
+                                PrimitivesConfig(min_grasp_margin=0.0)))
+    assert out.reason == "done", out
+    obs = observe(world)
+    plan = GraspPlan.from_state(nominal_model, NEAR_WEAK, obs.pose, obs.q, gains)
+    assert plan.squeeze.margin < gains.min_grasp_margin
+    assert Repose(nominal_model, NEAR_WEAK, -turn, REPOSE_S, gains).start(
+        dataclasses.replace(obs, plans={})) is not None
 
 
 def test_the_lone_finger_slides_up_an_upright_pole_but_never_down(nominal_model):

@@ -73,13 +73,19 @@ def _deepest_squeeze(Gr: np.ndarray, fn: np.ndarray, fric: np.ndarray, mu: float
     return (x[:m], float(x[m])) if x is not None else (np.zeros(m), 0.0)
 
 
+def squeeze_margin(G: np.ndarray, mu: float) -> float:
+    """The least slack, per newton of total squeeze, of the internal force deepest inside the
+    cones (``Squeeze.margin`` of a grasp whose every contact may squeeze; 0 when none is
+    strictly inside)."""
+    k = G.shape[1] // 2
+    return _deepest_squeeze(G, np.arange(0, 2 * k, 2), np.arange(2 * k).reshape(-1, 2), mu)[1]
+
+
 def has_strict_squeeze(G: np.ndarray, mu: float, least: float = MARGIN) -> bool:
     """True when an internal force lies strictly inside every friction cone (what
     ``Squeeze.build(G, mu, ...).usable`` says, without building the rest of the plan), with a
     slack of more than ``least`` (its ``margin``)."""
-    k = G.shape[1] // 2
-    _, margin = _deepest_squeeze(G, np.arange(0, 2 * k, 2), np.arange(2 * k).reshape(-1, 2), mu)
-    return margin > max(least, MARGIN)
+    return squeeze_margin(G, mu) > max(least, MARGIN)
 
 
 def strict_span(G0: np.ndarray, col: int, k: float, mu: float, bound: float,

@@ -18,7 +18,7 @@ import numpy as np
 
 from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.finger import FingerTerms
-from inhand_exp.control.forces import Squeeze, has_strict_squeeze, strict_span
+from inhand_exp.control.forces import Squeeze, has_strict_squeeze, squeeze_margin, strict_span
 from inhand_exp.control.grasp import (
     Contacts,
     contact_frames,
@@ -155,6 +155,29 @@ def firm_enough(squeeze: Squeeze, gains: PrimitivesConfig) -> bool:
     the object is shot out of the hand. A grasp without a strict squeeze (held by gravity, or
     by two fingers) is judged by its force plans alone."""
     return not squeeze.usable or squeeze.margin >= gains.min_grasp_margin
+
+
+def rolled_levers(model: HandModel, plan: GraspPlan, q: np.ndarray, q_end: dict[int, np.ndarray],
+                  dtheta: float) -> np.ndarray:
+    """The contact points (object frame, as ``plan.levers_O``) after a move that turns the
+    object by ``dtheta`` and brings finger ``i``'s joints from ``q`` to ``q_end[i]``.
+
+    A fingertip is a ball fixed to its distal link, and a 2-joint finger cannot choose the
+    link's angle: it follows from where the tip is. So the ball turns against the object by
+    ``alpha`` = the link's turn minus the object's, and, held by static friction, rolls: its
+    centre moves ``r alpha`` along the face (normal turned 90 deg, the way the angles turn),
+    and the contact with it. A repose of 0.1 rad moves a contact 2-3 mm this way, enough to
+    take a grasp from firm to weak in a few reposes. With the joints a repose ended at, within
+    0.1 mm of the simulated contacts; with those it planned, within 0.5 mm
+    (``test_a_repose_rolls_the_tips_as_predicted``)."""
+    r = model.tip_radius
+    levers = plan.levers_O.copy()
+    for k, i in enumerate(plan.fingers):
+        turn = (q_end[i][0] + q_end[i][1]) - (q[2 * i] + q[2 * i + 1]) - dtheta
+        alpha = (turn + math.pi) % (2 * math.pi) - math.pi
+        nx, nz = plan.normals_O[k]  # inward; the outward one turned: (n_z, -n_x) of inward
+        levers[k] += r * alpha * np.array([nz, -nx])
+    return levers
 
 
 def landing_span(model: HandModel, contacts: Contacts, finger: int, face, gains: PrimitivesConfig,
@@ -356,6 +379,7 @@ class Repose:
             return "the object would come down onto the palm"
         R = rotation(self.goal[2])
         gaps = face_gaps(self.model, self.contacts, obs)
+        q_end = {}
         for k, i in enumerate(self.plan.fingers):
             tip = self.goal[:2] + R @ self.plan.tips_O[k]
             qi = self.model.fingers[i].ik(tip, 1 if obs.q[2 * i + 1] >= 0 else -1)
@@ -366,6 +390,22 @@ class Repose:
             at = face_shifted(self.goal, self.plan.normals_O[k], gaps[i])
             if self.model.finger_gap(i, qi, at) < self.model.clearance:
                 return f"finger {i}'s links would cut into the object at the target pose"
+            q_end[i] = qi
+        self.q_end = q_end  # each finger's joints at the target pose, as planned
+        return self._ends_firm(obs, q_end)
+
+    def _ends_firm(self, obs, q_end: dict[int, np.ndarray]) -> str | None:
+        """Refuse a move whose tips would roll (``rolled_levers``) into a weak grasp: one that
+        no primitive may move again (``firm_enough``), a dead end."""
+        least = self.gains.min_grasp_margin
+        if not self.delta.any() or least <= 0 or not self.plan.squeeze.usable:
+            return None
+        levers = rolled_levers(self.model, self.plan, obs.q, q_end, float(self.delta[2]))
+        slack = squeeze_margin(grasp_matrix(levers, self.plan.normals_O),
+                               self.model.mu * self.gains.friction_margin)
+        if slack < least:
+            return (f"the grasp would end too weak to move again: its tips roll on the faces "
+                    f"to a squeeze slack of {slack:.3f} < {least}")
         return None
 
     def achieved(self, obs) -> str | None:

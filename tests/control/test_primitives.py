@@ -24,9 +24,16 @@ from inhand_exp.config import (
 )
 from inhand_exp.control.execute import Observation, Outcome, execute
 from inhand_exp.control.flip import Flip
-from inhand_exp.control.grasp import Contacts, Face, Posture, rotation
+from inhand_exp.control.forces import squeeze_margin
+from inhand_exp.control.grasp import Contacts, Face, Posture, grasp_matrix, rotation
 from inhand_exp.control.hand import GeometryError, HandModel
-from inhand_exp.control.repose import GraspPlan, Repose, rolled_levers, strict_hold
+from inhand_exp.control.repose import (
+    ROLL_REACH,
+    GraspPlan,
+    Repose,
+    rolled_levers,
+    strict_hold,
+)
 from inhand_exp.control.slide import Slide
 from inhand_exp.sim.world import World
 
@@ -318,6 +325,30 @@ def test_a_repose_rolls_the_tips_as_predicted(nominal_model, make_world, delta):
             assert np.abs(planned).max() < 5e-4, planned
         if delta[2]:
             assert np.abs(moved).max() > 1e-3, moved
+
+
+def test_one_repose_rolls_the_slack_down_by_less_than_roll_reach(nominal_model):
+    """The roll check solves its LP only for grasps within ``ROLL_REACH`` of the margin: over
+    random grasps of the whole workspace, no unit repose rolls the squeeze slack down by as
+    much (turns by a few hundredths at most)."""
+    from inhand_exp.control.sample import Workspace, random_grasp
+
+    gains = PrimitivesConfig(min_grasp_margin=0.0)
+    mu = nominal_model.mu * gains.friction_margin
+    rng = np.random.default_rng(1)
+    workspace = Workspace((-0.05, 0.18, -math.pi / 2), (0.05, 0.52, math.pi / 2))
+    falls = []
+    for _ in range(120):
+        pose, contacts, q = random_grasp(nominal_model, rng, workspace)
+        obs = Observation(q, np.zeros(6), pose, np.zeros(3), 0.0, plans={})
+        for delta in UNIT_REPOSES:
+            prim = Repose(nominal_model, contacts, delta, REPOSE_S, gains)
+            if prim.start(obs) is None and prim.plan.squeeze.usable:
+                levers = rolled_levers(nominal_model, prim.plan, q, prim.q_end, float(delta[2]))
+                falls.append(prim.plan.squeeze.margin
+                             - squeeze_margin(grasp_matrix(levers, prim.plan.normals_O), mu))
+    assert len(falls) > 300
+    assert 0.01 < max(falls) < ROLL_REACH / 1.5, max(falls)
 
 
 def test_a_repose_that_would_roll_the_grasp_weak_is_refused(nominal_model, make_world):

@@ -330,7 +330,7 @@ def test_a_repose_rolls_the_tips_as_predicted(nominal_model, make_world, delta):
 def test_one_repose_rolls_the_slack_down_by_less_than_roll_reach(nominal_model):
     """The roll check solves its LP only for grasps within ``ROLL_REACH`` of the margin: over
     random grasps of the whole workspace, no unit repose rolls the squeeze slack down by as
-    much (turns by a few hundredths at most)."""
+    much (by a few hundredths at most)."""
     from inhand_exp.control.sample import Workspace, random_grasp
 
     gains = PrimitivesConfig(min_grasp_margin=0.0)

@@ -182,8 +182,10 @@ class GoalsConfig:
                                   "pair draws its own.", length=3)
     train_groups: list[str] = spec([], "Groups the training episodes are drawn from, "
                                    "uniformly; empty: this group only. 'flip': hard pairs "
-                                   "that need a flip (about 13 % of the hard ones).",
-                                   choices=("easy", "medium", "hard", "flip"))
+                                   "that need a flip (about 13 % of the hard ones); 'lone' "
+                                   "(a pole): medium pairs whose lone finger must end lower "
+                                   "on the pole (about 13 % of the medium ones).",
+                                   choices=("easy", "medium", "hard", "flip", "lone"))
 
 
 @dataclass
@@ -449,6 +451,9 @@ def _check_consistency(cfg: DictConfig) -> None:
     if "frames_per_batch" in cfg.learner and cfg.learner.frames_per_batch % cfg.train.num_envs:
         raise ConfigError(f"learner.frames_per_batch={cfg.learner.frames_per_batch} must be a "
                           f"multiple of train.num_envs={cfg.train.num_envs}")
+    if "lone" in cfg.goals.train_groups and cfg.object.name != "pole":
+        raise ConfigError(f"goals.train_groups: 'lone' (a pole's lone finger ending lower) "
+                          f"has no pairs for object={cfg.object.name}")
     if cfg.object.name != cfg.primitives.name:
         raise ConfigError(f"primitives={cfg.primitives.name} does not fit object="
                           f"{cfg.object.name}; choose primitives={cfg.object.name}")

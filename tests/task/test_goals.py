@@ -148,6 +148,18 @@ def test_the_flip_training_group_draws_hard_pairs_that_need_a_flip(model):
         goal_set(model, "flip", 2, seed=1)  # a test set is one of the paper's groups
 
 
+def test_the_lone_training_group_draws_medium_pairs_whose_lone_finger_must_end_lower(model):
+    from inhand_exp.task.goals import lone_descends, sample_pair, with_lone_down
+
+    for i in range(3):
+        pair = sample_pair(model, "lone", np.random.default_rng([6, i]))
+        assert pair.group == "medium" and pair.lone_down and not pair.needs_flip
+        assert lone_descends(model, pair.contacts, pair.xg)
+        assert with_lone_down(model, pair) == pair  # the flag a test set would give it
+    with pytest.raises(ValueError, match="goal group must be one of"):
+        goal_set(model, "lone", 2, seed=1)
+
+
 def test_a_fixed_start_is_shared_by_every_pair_and_holds(model):
     """``goals.x0`` (the paper's cube study): one start pose and one grasp for every pair."""
     from inhand_exp.control.sample import holds_at

@@ -64,7 +64,9 @@ from inhand_exp.control.sample import (
 from inhand_exp.errors import GoalsError
 
 GROUPS = ("easy", "medium", "hard")
-TRAIN_GROUPS = (*GROUPS, "flip")  # flip: a hard pair that needs a flip (training only)
+# training only: flip, a hard pair that needs a flip; lone, a medium pair whose lone finger must
+# end lower on the pole (``lone_down``)
+TRAIN_GROUPS = (*GROUPS, "flip", "lone")
 SPLITS = ("train", "test")
 COLUMNS = ("group", "x0_x", "x0_z", "x0_theta", "xg_x", "xg_z", "xg_theta",
            "faces", "c0", "c1", "c2")
@@ -238,8 +240,9 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
                 tol: tuple[float, float] = (0.01, 0.1), max_tries: int = 500,
                 start: Start | None = None, fits=None,
                 fingers: tuple[int, ...] | None = FLIP_FINGERS) -> GoalPair:
-    """One pair of ``group`` (or, for ``flip``, a hard pair that needs a flip: a training
-    group that gives the rare flip-needing pairs a share of their own), by rejection sampling;
+    """One pair of ``group`` (or, for ``flip``, a hard pair that needs a flip, and for
+    ``lone``, a medium pair whose lone finger must end lower on the pole: training groups that
+    give those rare pairs a share of their own), by rejection sampling;
     from ``start`` (a pose and its grasp) when given, else from a random grasp of the
     workspace; only pairs that ``fits`` accepts (e.g. ``settable``), when given. With
     ``fingers`` (``flip_fingers``) and a pole, a hard pair is kept only when flips of those
@@ -256,7 +259,7 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
             xg = x0 + rng.uniform(-EASY_STEP, EASY_STEP)
             path = [x0 + (xg - x0) * s for s in np.linspace(0.2, 1.0, 5)]
             ok = _inside(ws, xg) and all(reachable(model, c0, p) for p in path)
-        elif group == "medium":
+        elif group in ("medium", "lone"):
             xg = ws.draw(rng)
             ok = grasp_of(model, c0.posture, xg, rng, tries=8) is not None
         else:
@@ -275,7 +278,10 @@ def sample_pair(model: HandModel, group: str, rng: np.random.Generator,
                     flip = needs_flip(model, c0.posture, xg, tol)
             if group == "flip" and not flip:
                 continue
-            pair = GoalPair("hard" if group == "flip" else group, x0, xg, c0, flip)
+            if group == "lone" and not lone_descends(model, c0, xg, tol):
+                continue
+            named = {"flip": "hard", "lone": "medium"}.get(group, group)
+            pair = GoalPair(named, x0, xg, c0, flip, lone_down=group == "lone")
             if fits is None or fits(pair):
                 return pair
     raise GeometryError(f"no {group} goal pair found in {max_tries} tries")

@@ -128,12 +128,13 @@ def test_random_torques_drop_the_pole_and_the_controllers_stay_far_below_the_lim
 
 def test_goals_times_a_draw_of_every_training_group(capsys):
     """Each group's pairs are drawn with the run's goals config; the flip group's pairs all
-    need a flip and the easy ones none."""
+    need a flip, the lone group's all need the lone finger lower, and the easy ones neither."""
     main(["goals", "--pairs", "2", "--seed", "3"])
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert set(out["ms_per_pair"]) == {"easy", "medium", "hard", "flip"}
+    assert set(out["ms_per_pair"]) == {"easy", "medium", "hard", "flip", "lone"}
     assert all(v > 0.0 for v in out["ms_per_pair"].values()) and out["raw_steps_per_s"] > 0
     assert out["needs_flip"]["flip"] == 2 and out["needs_flip"]["easy"] == 0
+    assert out["lone_down"]["lone"] == 2 and out["lone_down"]["easy"] == 0
     with pytest.raises(SystemExit, match="2"):
         main(["goals", "--pairs", "0"])
 

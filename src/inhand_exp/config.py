@@ -276,6 +276,11 @@ class TaskConfig:
                               "action, how much longer the route is by that action "
                               "(task/route.py RouteAdvice; the graph of route_cache_dir). "
                               "false: the paper's observation.")
+    posture_advice: bool = spec(False, "Append two flags to the policy's observation: no "
+                                "grasp of the fingers' posture holds the object at the goal "
+                                "(a flip is needed), and only grasps with the lone finger "
+                                "lower than now do (task/posture_advice.py; from the observed "
+                                "state). false: the paper's observation.")
     route_cap_s: float = spec(40.0, "Route times longer than this, and states with no route, "
                               "count as this long (s).", gt=0)
     route_cache_dir: str = spec("logs/cache", "Where the route shaping's graph is kept "

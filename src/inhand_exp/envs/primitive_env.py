@@ -5,8 +5,10 @@ Clocks: the policy acts once per primitive; the primitive's torque law runs ever
 settled (``primitives.settle_early``). Observation (paper IV-A): joint angles and
 velocities (12), the observed object pose ``X_t`` (3, with uniform noise under ``noise=paper``)
 and the goal ``X_g`` (3), then with ``task.route_advice`` the search graph's view of the
-observed state (``task.route.RouteAdvice``, 15 floats); ``action_mask`` says which actions the
-feasibility filter allows (with ``task.no_undo``, not the one that undoes the last).
+observed state (``task.route.RouteAdvice``, 15 floats), then with ``task.posture_advice``
+whether the posture can hold the goal (``task.posture_advice.PostureAdvice``, 2 flags);
+``action_mask`` says which actions the feasibility filter allows (with ``task.no_undo``, not the
+one that undoes the last).
 ``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
 with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
 into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made, the wall
@@ -37,6 +39,7 @@ from inhand_exp.task.actions import action_table, feasibility, make_primitive, u
 from inhand_exp.task.goal_task import GoalTask
 from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.graph import cached_graph
+from inhand_exp.task.posture_advice import PostureAdvice
 from inhand_exp.task.route import RouteAdvice
 from inhand_exp.task.rules import flip_useful
 from inhand_exp.task.scene import build_scene
@@ -80,7 +83,12 @@ class PrimitiveEnv(EnvBase):
         if scene.rules.route_advice:
             graph = cached_graph(cfg, SearchConfig(cache_dir=scene.rules.route_cache_dir))
             self.advice = RouteAdvice(graph, self.model, self.actions, scene.rules.route_cap_s)
-        extra = 0 if self.advice is None else self.advice.size
+        self.posture_advice = None  # task.posture_advice: what the posture can do for the goal
+        if scene.rules.posture_advice:
+            rules = scene.rules
+            self.posture_advice = PostureAdvice(self.model,
+                                                (rules.success_tol_m, rules.success_tol_rad))
+        extra = sum(a.size for a in (self.advice, self.posture_advice) if a is not None)
         declare_mid_level_specs(self, len(self.actions), OBS_DIM + extra)
         self.observation_spec["pose"] = Unbounded(shape=(3,), dtype=torch.float32)
         self.observation_spec["valid"] = Binary(n=1, dtype=torch.bool)
@@ -111,6 +119,8 @@ class PrimitiveEnv(EnvBase):
         parts = [obs.q, obs.qd, obs.pose, task.goal]
         if self.advice is not None:  # read from the observed state, as the search reads it
             parts.append(self.advice(obs.q, obs.pose, task.goal))
+        if self.posture_advice is not None:  # from the contacts the controllers see
+            parts.append(self.posture_advice(self.contacts, task.goal))
         vec = np.concatenate(parts).astype(np.float32)
         stuck = self.filter == "mask" and not mask.any()
         flags = {k: torch.tensor([v]) for k, v in done.items()}

@@ -13,12 +13,12 @@ OBS_DIM = 18  # q (6), qd (6), X_t (3), X_g (3)
 
 
 def advice_size(cfg) -> int:
-    """Floats ``task.route_advice`` appends to the observation (``task.route.RouteAdvice``):
-    the route time, and one per mid-level action; 0 without it."""
+    """Floats appended to the observation: ``task.route_advice``'s (``task.route.RouteAdvice``:
+    the route time, and one per mid-level action), then ``task.posture_advice``'s two flags
+    (``task.posture_advice.PostureAdvice``); 0 without either."""
     task = cfg["task"]
-    if not bool(task.get("route_advice", False)):
-        return 0
-    return 1 + len(action_table(cfg["primitives"]))
+    n = 1 + len(action_table(cfg["primitives"])) if bool(task.get("route_advice", False)) else 0
+    return n + (2 if bool(task.get("posture_advice", False)) else 0)
 
 
 def declare_mid_level_specs(env: EnvBase, n_actions: int, obs_dim: int = OBS_DIM) -> None:

@@ -180,7 +180,7 @@ class PPO:
                 f"checkpoint {path} is for {state.get('obs_dim')} observations and "
                 f"{state.get('n_actions')} actions; this configuration has {self.obs_dim} and "
                 f"{self.n_actions} (task.route_advice=true adds {1 + self.n_actions} "
-                f"observations to the paper's {OBS_DIM})")
+                f"observations to the paper's {OBS_DIM}, task.posture_advice=true 2)")
         saved = bool(state.get("grasp_features", False))
         if saved != self.grasp_features:
             raise CheckpointError(

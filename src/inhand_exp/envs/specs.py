@@ -8,6 +8,7 @@ from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from inhand_exp.task.actions import action_table
+from inhand_exp.task.posture_advice import PostureAdvice
 
 OBS_DIM = 18  # q (6), qd (6), X_t (3), X_g (3)
 
@@ -18,7 +19,7 @@ def advice_size(cfg) -> int:
     (``task.posture_advice.PostureAdvice``); 0 without either."""
     task = cfg["task"]
     n = 1 + len(action_table(cfg["primitives"])) if bool(task.get("route_advice", False)) else 0
-    return n + (2 if bool(task.get("posture_advice", False)) else 0)
+    return n + (PostureAdvice.size if bool(task.get("posture_advice", False)) else 0)
 
 
 def declare_mid_level_specs(env: EnvBase, n_actions: int, obs_dim: int = OBS_DIM) -> None:

@@ -21,7 +21,7 @@ import numpy as np
 
 from inhand_exp.control.grasp import Contacts
 from inhand_exp.control.hand import HandModel
-from inhand_exp.control.sample import elongated
+from inhand_exp.control.sample import elongated, lone_finger
 from inhand_exp.task.goals import LONE_SLACK_M, holds_near
 
 
@@ -47,14 +47,12 @@ class PostureAdvice:
         if posture not in self.holds:
             self.holds[posture] = holds_near(self.model, posture, goal, self.tol)
         flip = not self.holds[posture]
-        faces = posture.faces
-        alone = [i for i in range(3) if faces.count(faces[i]) == 1]
         lone = False
-        if self.pole and not flip and alone:
-            place = round(contacts.coords[alone[0]] / self.step_m)
+        if self.pole and not flip and len(set(posture.faces)) == 2:  # both faces touched
+            coord = contacts.coords[lone_finger(posture)]
+            place = round(coord / self.step_m)
             if (posture, place) not in self.lone_holds:
                 self.lone_holds[posture, place] = holds_near(
-                    self.model, posture, goal, self.tol,
-                    lone_min=contacts.coords[alone[0]] - LONE_SLACK_M)
+                    self.model, posture, goal, self.tol, lone_min=coord - LONE_SLACK_M)
             lone = not self.lone_holds[posture, place]
         return np.array([float(flip), float(lone)])

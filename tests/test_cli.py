@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from inhand_exp.record import read_log
 from inhand_exp.task.goals import load_goals
@@ -240,6 +241,34 @@ def test_goals_mode_writes_a_test_set_that_eval_reads_back(tmp_path, tiny_policy
     assert [e["xg"] for e in episodes] == [list(p.xg) for p in back]
     assert [e["needs_flip"] for e in episodes] == [p.needs_flip for p in back]
     assert [e["lone_down"] for e in episodes] == [p.lone_down for p in back]
+
+
+def test_an_evaluation_on_training_pairs_records_demonstrations_that_training_checks(
+        tmp_path, tiny_policy):
+    runs = {}
+    for split in ("test", "train"):
+        res = inhand_exp("mode=eval", f"checkpoint={tiny_policy}", f"eval.split={split}",
+                         "eval.demonstrations=true",
+                         f"hydra.run.dir={tmp_path / split}", cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        assert "demonstrations: 1 episode, 0 successful" in res.stdout  # FAST: 1 episode
+        runs[split] = read_log(tmp_path / split / "run.mcap")
+    x0 = {k: [e["x0"] for e in log.topic("/eval/episode")] for k, log in runs.items()}
+    assert all(a != b for a, b in zip(x0["test"], x0["train"], strict=True))  # other pairs
+    demos = torch.load(tmp_path / "train" / "demonstrations.pt", weights_only=True)
+    acts = runs["train"].topic("/episode/action")
+    assert demos["action"].tolist() == [a["action"] for a in acts]
+    assert demos["episode"].tolist() == [a["episode"] for a in acts]
+    assert demos["success"].tolist() == [e["success"] for e in runs["train"].topic(
+        "/eval/episode")]
+    # the tiny policy solves nothing in two actions: no step to clone, refused before a run
+    path = tmp_path / "train" / "demonstrations.pt"
+    for extra, says in (([], "hold no step of a successful episode"),
+                        (["task.posture_advice=true"], "recorded with 18 observations")):
+        res = inhand_exp("mode=train", f"learner.demonstrations=[{path}]", *extra,
+                         f"hydra.run.dir={tmp_path / 'clone'}", cwd=tmp_path)
+        assert res.returncode == 2 and says in res.stderr, res.stderr
+        assert not (tmp_path / "clone" / "run.mcap").exists()
 
 
 def test_a_fixed_start_pose_starts_every_pair_and_an_unholdable_one_is_refused(tmp_path):

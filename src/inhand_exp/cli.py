@@ -20,7 +20,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError, register_configs, validate
-from inhand_exp.errors import CheckpointError, GoalsError
+from inhand_exp.errors import CheckpointError, DemonstrationsError, GoalsError
 from inhand_exp.runinfo import CONF_DIR
 
 register_configs()
@@ -277,7 +277,8 @@ def _app(cfg: DictConfig) -> None:
     try:
         check_choices(hc.runtime.choices)
         log_path = run(cfg, run_dir, list(hc.overrides.task))
-    except (ConfigError, CheckpointError, GoalsError, FileNotFoundError) as err:
+    except (ConfigError, CheckpointError, DemonstrationsError, GoalsError,
+            FileNotFoundError) as err:
         if (stop := interrupt_behind(err)) is not None:
             _stopped(stop, cfg, run_dir, in_sweep)
         if in_sweep:

@@ -210,6 +210,15 @@ class PPOConfig(LearnerConfig):
     grasp_features: bool = spec(True, "Also feed the networks each fingertip's place on the "
                                 "object (forward kinematics of q in the frame of X_t) and the "
                                 "feasibility mask; false: the paper's q, qd, X_t, X_g only.")
+    demonstrations: list[str] = spec([], "Files of another policy's episodes (an evaluation "
+                                     "with eval.demonstrations=true, e.g. the search's) to "
+                                     "clone before PPO starts; only successful episodes count.")
+    bc_epochs: int = spec(30, "Passes of behaviour cloning over the demonstrations before the "
+                          "first iteration.", ge=0)
+    bc_coef: float = spec(1.0, "Weight of the cloning term added to PPO's loss at the start; "
+                          "it falls linearly to 0 over bc_frames.", ge=0)
+    bc_frames: int = spec(49152, "Frames over which the cloning term's weight falls to 0.",
+                          gt=0)
 
 
 @dataclass
@@ -321,6 +330,13 @@ class EvalConfig:
     goals_file: str | None = spec(None, "CSV/Parquet goal set to evaluate on instead.")
     sample: bool = spec(True, "Draw each action from the policy, as it was trained (seeded from "
                         "seed); false: take its most likely action, which can cycle.")
+    split: str = spec("test", "Which of the group's pairs to play: test (the benchmark's) or "
+                      "train (drawn as the test pairs are, from another stream: for recording "
+                      "demonstrations without touching the test pairs).",
+                      choices=("test", "train"))
+    demonstrations: bool = spec(False, "Also write demonstrations.pt: every step's observation, "
+                                "mask and action, with each episode's outcome, for PPO's "
+                                "learner.demonstrations.")
 
 
 @dataclass

@@ -11,3 +11,7 @@ class CheckpointError(ValueError):
 
 class GoalsError(ValueError):
     """A goal file that cannot be used, with the row and column at fault."""
+
+
+class DemonstrationsError(ValueError):
+    """A demonstrations file that cannot be read, or does not fit this configuration."""

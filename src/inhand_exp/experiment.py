@@ -25,6 +25,7 @@ from inhand_exp.config import ConfigError
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.batched import batched_env
+from inhand_exp.learn.demonstrations import DemoRecorder
 from inhand_exp.learn.evaluate import evaluate
 from inhand_exp.learn.registry import Learner, make_learner
 from inhand_exp.progress import ProgressBar
@@ -240,7 +241,7 @@ def test_goals(cfg) -> list[GoalPair]:
                              f"does not fit the simulated object (perturb={cfg.perturb.name}) "
                              f"at X0, so those episodes cannot start")
         return goals
-    return goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed,
+    return goal_set(model, cfg.goals.name, cfg.eval.episodes, cfg.goals.seed, cfg.eval.split,
                     workspace=Workspace.from_config(cfg.task),
                     hard_posture=cfg.goals.hard_goal_posture, start=start_of(model, cfg.goals),
                     fits=fits, fingers=reach_fingers(model, cfg),
@@ -291,8 +292,12 @@ def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
     scene = SceneReplay(log.write, SceneGeometry.from_config(cfg), cfg.log.scene_episodes,
                         time.time_ns())
 
+    demos = DemoRecorder() if cfg.eval.demonstrations else None
+
     def on_episode(rec: dict) -> None:
         log.write("/eval/episode", {**rec, **labels})
+        if demos is not None:
+            demos.end(rec)
         scene.on_episode(rec)
         results.append(rec["success"])
         bar.update(len(results), f"success {np.mean(results):5.1%}")
@@ -315,10 +320,19 @@ def _evaluate(cfg, learner: Learner, run_dir: Path, log: RunLog, say,
                            on_state=on_state,
                            action_names=[a.name for a in actions] if actions else None,
                            sample=cfg.eval.sample,
-                           flip_actions=flip_actions(actions) if actions else None)
+                           flip_actions=flip_actions(actions) if actions else None,
+                           on_step=demos.step if demos is not None else None)
     finally:
         bar.close()
         env.close()
+    if demos is not None:
+        name = Path(goals_file).stem.replace("goals", "demonstrations", 1) + ".pt"
+        path = demos.save(run_dir / name, {
+            "learner": str(cfg.learner.name), "goals": str(cfg.goals.name),
+            "split": str(cfg.eval.split), "task": OmegaConf.to_container(cfg.task, resolve=True,
+                                           enum_to_str=True)})
+        n, won = len(demos.outcome), sum(success for success, _ in demos.outcome.values())
+        say(f"demonstrations: {n} episode{'s' * (n != 1)}, {won} successful, written to {path}")
     say(table(summary, cfg, sampled=cfg.eval.sample and learner.stochastic))
     return summary
 

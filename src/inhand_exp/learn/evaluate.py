@@ -35,10 +35,12 @@ def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
              on_episode: Sink | None = None, on_action: Sink | None = None,
              on_state: Sink | None = None, action_names: Sequence[str] | None = None,
              sample: bool = False,
-             flip_actions: Collection[int] | None = None) -> dict[str, float]:
+             flip_actions: Collection[int] | None = None,
+             on_step: Callable[[int, Any], None] | None = None) -> dict[str, float]:
     """Play every pair of ``goals`` once with the policy's most likely actions (``sample``:
     actions drawn from it, with torch's global generator); summarise. ``flip_actions``: the
     indices whose finished runs each episode counts (``n_flips``); None: no count.
+    ``on_step(episode, row)``: every action's tensordict row (what the policy saw and did).
 
     The batch runs in this process's policy call, so the draws do not depend on the backend.
     """
@@ -62,6 +64,8 @@ def evaluate(env: EnvBase, policy, goals: Sequence[GoalPair],
                     continue
                 ep = i + n * int(played[i])
                 row = flat[i]
+                if on_step is not None:
+                    on_step(ep, row)
                 if on_action is not None:
                     on_action(_action(row, ep, int(steps[i]), action_names))
                 if on_state is not None and "states" in row["next"]:

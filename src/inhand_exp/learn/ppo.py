@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import torch
+from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.collectors import Collector
@@ -33,6 +34,7 @@ from inhand_exp.learn.checkpoint import (
     stamped,
     trained_with,
 )
+from inhand_exp.learn.demonstrations import clone, cloning_loss, load_demonstrations
 from inhand_exp.learn.features import HandGeometry, ObservationFeatures
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import action_table
@@ -74,7 +76,10 @@ def from_config(cfg) -> PPO:
     """The mid-level PPO learner of ``cfg`` (the ``learner.ppo`` entry of the registry)."""
     params = typed(cfg.learner, PPOConfig)
     hand = HandGeometry.from_config(cfg.hand) if params.grasp_features else None
-    return PPO(OBS_DIM + advice_size(cfg), len(action_table(cfg.primitives)), params, hand)
+    obs_dim, n_actions = OBS_DIM + advice_size(cfg), len(action_table(cfg.primitives))
+    demos = (load_demonstrations(params.demonstrations, obs_dim, n_actions)
+             if params.demonstrations else None)
+    return PPO(obs_dim, n_actions, params, hand, demos)
 
 
 class PPO:
@@ -88,8 +93,9 @@ class PPO:
     env_class = PrimitiveEnv  # the batched mid-level environment
 
     def __init__(self, obs_dim: int, n_actions: int, params: PPOConfig,
-                 hand: HandGeometry | None = None):
+                 hand: HandGeometry | None = None, demos: TensorDict | None = None):
         self.params, self.obs_dim, self.n_actions = params, obs_dim, n_actions
+        self.demos = demos  # steps of another policy's successful episodes (demonstrations)
         self.grasp_features = hand is not None
         self.actor, self.critic = make_networks(obs_dim, n_actions, tuple(params.hidden), hand)
         self.advantage = GAE(gamma=params.gamma, lmbda=params.gae_lambda,
@@ -110,6 +116,13 @@ class PPO:
         """Collect ``total_frames`` more actions (whole batches) from ``env``, learn from them."""
         p = self.params
         batches = -(-total_frames // p.frames_per_batch)
+        cloned, clone_s = {}, 0.0
+        if self.demos is not None and self.iteration == 0 and p.bc_epochs > 0:
+            t = time.perf_counter()
+            # reported with the first iteration, its wall time in that iteration's learning
+            cloned = {"loss_bc_clone": clone(self.actor, self.demos, p.bc_epochs,
+                                             p.minibatch_size, self.optim, p.max_grad_norm)}
+            clone_s = time.perf_counter() - t
         collector = Collector(env, self.actor, frames_per_batch=p.frames_per_batch,
                               total_frames=batches * p.frames_per_batch,
                               auto_register_policy_transforms=False)  # not recurrent
@@ -123,9 +136,10 @@ class PPO:
                 self.iteration += 1
                 self.frames += batch.numel()
                 if progress is not None:
-                    progress(self.iteration, {"frames": self.frames, **metrics,
+                    progress(self.iteration, {"frames": self.frames, **metrics, **cloned,
                                               "collect_s": collected - t,
-                                              "learn_s": learned - collected})
+                                              "learn_s": learned - collected + clone_s})
+                cloned, clone_s = {}, 0.0
                 if checkpoint is not None and self.iteration % checkpoint_every == 0:
                     self.save(checkpoint)
                 t = time.perf_counter()
@@ -134,16 +148,30 @@ class PPO:
         if checkpoint is not None:
             self.save(checkpoint)
 
+    def bc_weight(self) -> float:
+        """The cloning term's weight now: ``bc_coef`` falling linearly to 0 over
+        ``bc_frames`` frames; 0 without demonstrations."""
+        if self.demos is None:
+            return 0.0
+        p = self.params
+        return p.bc_coef * max(0.0, 1.0 - self.frames / p.bc_frames)
+
     def _update(self, batch) -> dict[str, float]:
         p = self.params
         with torch.no_grad():
             self.advantage(batch)
         flat = batch.reshape(-1)
-        losses = []
+        losses, bc = [], []
+        weight = self.bc_weight()
         for _ in range(p.epochs):
             for idx in torch.randperm(len(flat)).split(p.minibatch_size):
                 out = self.loss(flat[idx])
                 total = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
+                if weight > 0:
+                    demo = self.demos[torch.randint(len(self.demos), (len(idx),))]
+                    term = cloning_loss(self.actor, demo)
+                    total = total + weight * term
+                    bc.append(float(term.detach()))
                 self.optim.zero_grad()
                 total.backward()
                 nn.utils.clip_grad_norm_(self.loss.parameters(), p.max_grad_norm)
@@ -153,7 +181,9 @@ class PPO:
         done = batch["next", "done"].squeeze(-1)
         ends = max(int(done.sum()), 1)
         mean = torch.tensor(losses).mean(0).tolist()
+        cloning = {"loss_bc": sum(bc) / len(bc), "bc_weight": weight} if bc else {}
         return {"loss_objective": mean[0], "loss_critic": mean[1], "loss_entropy": mean[2],
+                **cloning,
                 "mean_reward": float(batch["next", "reward"].mean()),
                 "episodes": float(done.sum()),
                 "success_rate": float(batch["next", "success"].squeeze(-1)[done].sum()) / ends,

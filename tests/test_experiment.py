@@ -20,6 +20,8 @@ def test_table_sets_ours_beside_the_papers_cells_in_aligned_columns(compose_cfg)
     assert sparse[3].split() == ["drop", "1.2%", "-"]
     assert len({len(line) for line in sparse[1:]}) == 1  # every row as wide as the header
     assert "sampled actions" in sparse[0] and "deterministic actions" in full[0]
+    assert "training pairs" in table(SUMMARY, compose_cfg("eval.split=train"), True)
+    assert "training pairs" not in full[0]
     assert paper_row(compose_cfg("object.name=pole", "perturb=heavier")) is not None
     assert paper_row(compose_cfg("goals=easy", "noise=paper")) is None
     assert paper_row(compose_cfg("object=cube", "goals=hard"))["success_rate"] == "0.714"

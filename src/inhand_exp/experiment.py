@@ -376,7 +376,9 @@ def table(summary: dict[str, float], cfg, sampled: bool) -> str:
 
     how = "sampled" if sampled else "deterministic"
     head = f"{cfg.learner.name} {cfg.goals.name} {cfg.object.name} perturb={cfg.perturb.name} " \
-           f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions"
+           f"noise={cfg.noise.name}, {summary['episodes']} episodes, {how} actions" \
+           + (" (training pairs, not the paper's test set)"
+              if cfg.eval.split == "train" else "")
     flips = [f"{label:14s}{summary[f'{flag}_success_rate']:10.1%}{'-':>10s}"
              f"   ({summary[flag]} episodes; drops {summary[f'{flag}_drop_rate']:.1%}"
              f"{_flipped(summary, f'{flag}_')})"

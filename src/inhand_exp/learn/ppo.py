@@ -5,7 +5,9 @@ probability), the critic a value network; both are 3 x 256 MLPs as in the paper.
 through ``progress(iteration, metrics)`` and never imports the logger; the metrics include the
 wall time of the iteration's collection (``collect_s``) and of its update (``learn_s``). A
 checkpoint holds everything needed to resume (networks, optimiser, counters, RNG states) as
-tensors and plain numbers, so it loads with ``torch.load(weights_only=True)``.
+tensors and plain numbers, so it loads with ``torch.load(weights_only=True)``. With
+demonstrations (``learn.demonstrations``) the actor is cloned from them before the first
+iteration, and a fading cloning term joins the loss.
 """
 
 from __future__ import annotations

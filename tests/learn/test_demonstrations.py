@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.envs.utils import ExplorationType
 
 from inhand_exp.config import PPOConfig
 from inhand_exp.envs.toy import ToyLineEnv
@@ -78,21 +78,15 @@ def test_demonstrations_that_do_not_fit_are_refused_naming_the_file(tmp_path):
         load_demonstrations([tmp_path / "missing.pt"], 18, 14)
 
 
-def greedy_success(actor, episodes: int = 40, seed: int = 99) -> float:
-    env, wins = ToyLineEnv(seed=seed), 0
-    for _ in range(episodes):
-        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-            td = env.rollout(env.max_steps, policy=actor, break_when_any_done=True)
-        wins += bool(td["next", "success"][-1])
-    return wins / episodes
-
-
-def test_cloning_makes_the_untrained_actor_act_like_the_demonstrator(tmp_path):
+def test_cloning_makes_the_untrained_actor_act_like_the_demonstrator(tmp_path, toy_success):
     path = tmp_path / "demonstrations.pt"
     record(path, 60, stray_every=4)
     torch.manual_seed(0)
     data = load_demonstrations([path], 18, 14)
     ppo = PPO(18, 14, SMALL, demos=data)
+    def greedy_success(actor) -> float:
+        return toy_success(actor, 40, 99, ExplorationType.DETERMINISTIC)
+
     before = greedy_success(ppo.actor)
     loss = clone(ppo.actor, data, 40, 64, ppo.optim, 1.0)
     after = greedy_success(ppo.actor)

@@ -4,23 +4,12 @@ from __future__ import annotations
 
 import pytest
 import torch
-from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from inhand_exp.config import PPOConfig
 from inhand_exp.envs.toy import ToyLineEnv
 from inhand_exp.learn.ppo import PPO
 
 SMALL = PPOConfig(frames_per_batch=256, minibatch_size=64, epochs=4, hidden=[64, 64], lr=1e-3)
-
-
-def success_rate(policy, episodes: int = 60, seed: int = 123) -> float:
-    env = ToyLineEnv(seed=seed)
-    wins = 0
-    for _ in range(episodes):
-        with set_exploration_type(ExplorationType.RANDOM), torch.no_grad():
-            td = env.rollout(env.max_steps, policy=policy, break_when_any_done=True)
-        wins += bool(td["next", "success"][-1])
-    return wins / episodes
 
 
 def random_masked(td):
@@ -30,16 +19,16 @@ def random_masked(td):
     return td.set("action", pick.reshape(td.shape))
 
 
-def test_ppo_beats_a_random_policy_on_the_toy_task():
+def test_ppo_beats_a_random_policy_on_the_toy_task(toy_success):
     torch.manual_seed(0)
     ppo = PPO(18, 14, SMALL)
     seen = []
     ppo.train(ToyLineEnv(seed=0), 256 * 12, progress=lambda i, m: seen.append((i, m["frames"])))
     assert seen == [(i, 256 * i) for i in range(1, 13)]
     torch.manual_seed(1)
-    random_rate = success_rate(random_masked)
+    random_rate = toy_success(random_masked)
     torch.manual_seed(1)
-    trained_rate = success_rate(ppo.actor)
+    trained_rate = toy_success(ppo.actor)
     assert trained_rate >= 0.9 and trained_rate > random_rate + 0.2, (trained_rate, random_rate)
 
 

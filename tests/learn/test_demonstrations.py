@@ -84,12 +84,10 @@ def test_cloning_makes_the_untrained_actor_act_like_the_demonstrator(tmp_path, t
     torch.manual_seed(0)
     data = load_demonstrations([path], 18, 14)
     ppo = PPO(18, 14, SMALL, demos=data)
-    def greedy_success(actor) -> float:
-        return toy_success(actor, 40, 99, ExplorationType.DETERMINISTIC)
-
-    before = greedy_success(ppo.actor)
+    greedy = dict(episodes=40, seed=99, mode=ExplorationType.DETERMINISTIC)
+    before = toy_success(ppo.actor, **greedy)
     loss = clone(ppo.actor, data, 40, 64, ppo.optim, 1.0)
-    after = greedy_success(ppo.actor)
+    after = toy_success(ppo.actor, **greedy)
     assert after >= 0.95 and after > before + 0.2, (before, after, loss)
 
 

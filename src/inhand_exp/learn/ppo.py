@@ -6,7 +6,7 @@ through ``progress(iteration, metrics)`` and never imports the logger; the metri
 wall time of the iteration's collection (``collect_s``) and of its update (``learn_s``). A
 checkpoint holds everything needed to resume (networks, optimiser, counters, RNG states) as
 tensors and plain numbers, so it loads with ``torch.load(weights_only=True)``. With
-demonstrations (``learn.demonstrations``) the actor is cloned from them before the first
+demonstrations (``learner.demonstrations``) the actor is cloned from them before the first
 iteration, and a fading cloning term joins the loss.
 """
 

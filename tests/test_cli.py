@@ -156,6 +156,7 @@ def test_eval_mode_uses_a_checkpoint_and_refuses_bad_ones(tmp_path, tiny_policy)
         (["mode=eval"], "mode=eval needs checkpoint=PATH"),
         (["mode=eval", f"checkpoint={tmp_path / 'missing.pt'}"], "not found"),
         (["mode=eval", f"checkpoint={tmp_path / 'text.pt'}"], "not a policy.pt"),
+        (["mode=eval", "checkpoint=packaged:table9"], "no packaged policy 'table9'"),
         ([*ev, "object=cube"], "this configuration has"),
         ([*ev, "learner=ddpg"], "this configuration has learner=ddpg"),
         ([*ev, f"eval.goals_file={tmp_path / 'no.csv'}"], "not found"),
@@ -571,6 +572,24 @@ def test_the_default_run_shows_the_packaged_policy_on_every_group(tmp_path):
     assert not (run / "policy.pt").exists()  # nothing trained
     for banner in ("pybullet build time", "Running HiGHS"):  # C libraries' banners: silenced
         assert banner not in res.stdout + res.stderr
+
+
+def test_a_packaged_policy_is_named_by_checkpoint_and_its_task_settings_are_asked_for(tmp_path):
+    """`checkpoint=packaged:NAME` shows another packaged policy the way `inhand-exp` alone shows
+    the Table II one, and says which of its training's task settings the run lacks."""
+    common = ["checkpoint=packaged:table2_clone_seed0", "eval.episodes=1", "train.num_envs=1",
+              "train.backend=serial", "log.progress=false", "log.sim_state_hz=0"]
+    bare = subprocess.run([*APP, *common, f"hydra.run.dir={tmp_path / 'bare'}"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert bare.returncode == 0, bare.stderr
+    assert "the packaged policy table2_clone_seed0 (1,024 frames" in bare.stdout
+    assert "trained with task.no_undo=true (here: false)" in bare.stdout
+    same = subprocess.run([*APP, *common, "task.no_undo=true",
+                           f"hydra.run.dir={tmp_path / 'same'}"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert same.returncode == 0, same.stderr
+    assert "note: the policy was trained with" not in same.stdout
+    assert len(read_log(tmp_path / "same" / "run.mcap").topic("/eval/episode")) == 3
 
 
 def test_help_names_the_app_and_lists_only_real_options(tmp_path):

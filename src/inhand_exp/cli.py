@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp.config import ConfigError, register_configs, validate
 from inhand_exp.errors import CheckpointError, DemonstrationsError, GoalsError
+from inhand_exp.policies import resolve
 from inhand_exp.runinfo import CONF_DIR
 
 register_configs()
@@ -38,6 +39,7 @@ def fresh_log_path(run_dir: Path, name: str) -> Path:
 def run(cfg: DictConfig, run_dir: Path, overrides: list[str]) -> Path:
     """Validate ``cfg``, open the run log in ``run_dir`` and do what ``cfg.mode`` asks."""
     validate(cfg)
+    cfg.checkpoint = resolve(cfg.checkpoint)  # packaged:NAME -> the packaged policy's file
     for what, name in (("checkpoint", cfg.checkpoint), ("goal file", cfg.eval.goals_file)):
         if name and not Path(name).is_file():  # before anything is written
             raise FileNotFoundError(f"{what} {name} not found")

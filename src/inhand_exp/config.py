@@ -371,7 +371,9 @@ class Config:
                       "checkpoint=, on eval.episodes test pairs of each goal group), train, "
                       "eval, train_eval, or goals (write the goals group's test set of "
                       "eval.episodes pairs to goals.csv, no policy involved).")
-    checkpoint: str | None = spec(None, "Policy checkpoint to evaluate or to train on from.")
+    checkpoint: str | None = spec(None, "Policy checkpoint to evaluate or to train on from: a "
+                                    "policy.pt, or packaged:NAME for one packaged with "
+                                    "inhand-exp (src/inhand_exp/policies/README.md).")
     resume: str | None = spec(None, "Run directory of an interrupted training to continue.")
 
 

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from inhand_exp import policies
 from inhand_exp.config import ConfigError
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
@@ -46,12 +47,12 @@ from inhand_exp.task.goals import (
 from inhand_exp.task.scene import true_object
 
 CHECKPOINT = "policy.pt"
-PACKAGED = "table2_ppo_seed0.pt"  # in inhand_exp/policies/: what mode=demo shows
+PACKAGED = f"{policies.DEMO}.pt"  # in inhand_exp/policies/: what mode=demo shows
 DEMO_GROUPS = ("easy", "medium", "hard")
 
 
 def packaged_policy() -> Path:
-    return Path(str(importlib.resources.files("inhand_exp").joinpath("policies", PACKAGED)))
+    return policies.packaged(policies.DEMO)
 
 
 def derived_seed(seed: int, *stream: int) -> int:
@@ -264,6 +265,9 @@ def _demo(cfg, learner: Learner, run_dir: Path, log: RunLog, say) -> dict[str, f
     the states of the last group's episodes recorded (for ``inhand-render``)."""
     which = cfg.checkpoint or f"the packaged Table II policy ({PACKAGED}: PPO, seed 0, " \
         f"{learner.frames:,} frames of the README recipe)"
+    if cfg.checkpoint and Path(cfg.checkpoint).parent == packaged_policy().parent:
+        which = (f"the packaged policy {Path(cfg.checkpoint).stem} ({learner.frames:,} frames; "
+                 f"its recipe: src/inhand_exp/policies/README.md)")
     say(f"inhand-exp demo: {which}, evaluated on the first {cfg.eval.episodes} test pairs of "
         f"each goal group ({', '.join(DEMO_GROUPS)}). The README's Table II uses 500 pairs "
         f"per group. To train a policy of your own instead: inhand-exp mode=train_eval "

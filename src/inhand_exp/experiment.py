@@ -263,11 +263,14 @@ def write_goal_set(cfg, run_dir: Path, say) -> Path:
 def _demo(cfg, learner: Learner, run_dir: Path, log: RunLog, say) -> dict[str, float]:
     """``mode=demo``: the policy on the first ``eval.episodes`` test pairs of each group, with
     the states of the last group's episodes recorded (for ``inhand-render``)."""
-    which = cfg.checkpoint or f"the packaged Table II policy ({PACKAGED}: PPO, seed 0, " \
-        f"{learner.frames:,} frames of the README recipe)"
-    if cfg.checkpoint and Path(cfg.checkpoint).parent == packaged_policy().parent:
+    if not cfg.checkpoint:
+        which = (f"the packaged Table II policy ({PACKAGED}: PPO, seed 0, "
+                 f"{learner.frames:,} frames of the README recipe)")
+    elif Path(cfg.checkpoint).parent == packaged_policy().parent:
         which = (f"the packaged policy {Path(cfg.checkpoint).stem} ({learner.frames:,} frames; "
                  f"its recipe: src/inhand_exp/policies/README.md)")
+    else:
+        which = cfg.checkpoint
     say(f"inhand-exp demo: {which}, evaluated on the first {cfg.eval.episodes} test pairs of "
         f"each goal group ({', '.join(DEMO_GROUPS)}). The README's Table II uses 500 pairs "
         f"per group. To train a policy of your own instead: inhand-exp mode=train_eval "

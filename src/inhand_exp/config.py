@@ -268,6 +268,10 @@ class TaskConfig:
                          "undo the last one carried out (the opposite repose, the same finger's "
                          "slide back), unless no other action is allowed; false: the paper's "
                          "filter.")
+    no_undo_flip: bool = spec(False, "The feasibility filter also refuses a flip right after "
+                              "the same flip (the object holds still in a flip and the finger "
+                              "lands nearest where it was, so the second carries it back), "
+                              "unless no other action is allowed; false: the paper's filter.")
     reward_goal: float = spec(5.0, "Reward on reaching the goal.")
     reward_invalid: float = spec(-0.01, "Reward of an infeasible action (penalty mode).")
     reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")

@@ -112,6 +112,22 @@ def test_flip_reward_is_paid_for_useful_flips_to_new_postures(compose_cfg, angle
     assert out["reward"].item() == pytest.approx(paid)
 
 
+def test_no_undo_flip_refuses_the_same_flip_right_after_it(compose_cfg):
+    start = Contacts(Posture((L, R, R)), (-0.21, -0.205, -0.15))
+    pair = GoalPair("hard", XF.copy(), XF + np.array([0.0, 0.0, 0.6]), start, True)
+    allowed = []
+    for overrides in ([], ["task.no_undo_flip=true"]):
+        env = PrimitiveEnv(compose_cfg(*overrides), goals=[pair], seed=0)
+        td = env.reset()
+        flip = next(a.index for a in env.actions if a.name == "flip right")
+        td = env.step(td.set("action", torch.tensor(flip)))["next"]
+        assert OUTCOMES[int(td["outcome"])] == "done"
+        assert str(env.contacts.posture) == "left/right/left"
+        allowed.append({a.name for a in env.actions if td["action_mask"][a.index]})
+    assert "flip right" in allowed[0]  # the filter alone would carry finger 2 straight back
+    assert allowed[1] == allowed[0] - {"flip right"}
+
+
 def test_training_episodes_mix_the_listed_groups(compose_cfg):
     mixed = PrimitiveEnv(compose_cfg("goals=easy", "goals.train_groups=[medium,hard]"), seed=0)
     plain = PrimitiveEnv(compose_cfg("goals=easy"), seed=0)

@@ -8,7 +8,7 @@ and the goal ``X_g`` (3), then with ``task.route_advice`` the search graph's vie
 observed state (``task.route.RouteAdvice``, 15 floats), then with ``task.posture_advice``
 whether the posture can hold the goal (``task.posture_advice.PostureAdvice``, 2 flags);
 ``action_mask`` says which actions the feasibility filter allows (with ``task.no_undo``, not the
-one that undoes the last).
+one that undoes the last; with ``task.no_undo_flip``, not the last flip again).
 ``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
 with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
 into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made, the wall
@@ -70,8 +70,11 @@ class PrimitiveEnv(EnvBase):
         self.filter = str(scene.rules.filter)
         self.noisy = bool(scene.noise.any())
         self.actions = action_table(self.prim)
-        # with task.no_undo: the action that would undo the last one carried out, refused
-        self.undoes = undo_actions(self.actions) if scene.rules.no_undo else None
+        # with task.no_undo (no_undo_flip): the action that would undo the last one carried
+        # out (a flip's repeat), refused
+        rules = scene.rules
+        self.undoes = (undo_actions(self.actions, rules.no_undo, rules.no_undo_flip)
+                       if rules.no_undo or rules.no_undo_flip else None)
         self.undo: int | None = None
         self.idle, self.last = False, None
         self.snapshots = None

@@ -61,11 +61,21 @@ def flip_actions(actions: tuple[Action, ...]) -> frozenset[int]:
     return frozenset(a.index for a in actions if a.kind in ("flip", "land"))
 
 
-def undo_actions(actions: tuple[Action, ...]) -> tuple[int | None, ...]:
-    """For each action, the index of the one that undoes it (the opposite repose, the same
-    finger's slide back), or None (flips, releases and lands)."""
+def undo_actions(actions: tuple[Action, ...], moves: bool = True,
+                 flips: bool = False) -> tuple[int | None, ...]:
+    """For each action, the index of the one that undoes it, or None (releases and lands).
+
+    ``moves``: a repose is undone by the opposite repose, a slide by the same finger's slide
+    back. ``flips``: a flip by the same flip (the object holds still during a flip and the
+    finger lands nearest its present coordinate, so a second flip carries it back to about
+    where it was).
+    """
     def undoes(a: Action, b: Action) -> bool:
-        if a.kind != b.kind or a.kind not in ("repose", "slide"):
+        if a.kind != b.kind:
+            return False
+        if a.kind == "flip":
+            return flips and a.finger == b.finger
+        if a.kind not in ("repose", "slide") or not moves:
             return False
         if a.kind == "repose":
             return all(x == -y for x, y in zip(a.delta, b.delta, strict=True))

@@ -115,3 +115,16 @@ def test_each_repose_and_slide_is_undone_by_its_opposite(compose_cfg):
     assert pairs["slide finger 1 +"] == "slide finger 1 -"
     assert len(pairs) == 12  # 6 reposes and 6 slides; flips have none
     assert all(undo[u] == a.index for a, u in zip(actions, undo, strict=True) if u is not None)
+
+
+def test_a_flip_is_undone_by_itself_only_when_asked(compose_cfg):
+    actions = action_table(compose_cfg().primitives)
+    names = {a.index: a.name for a in actions}
+    for moves, count in ((False, 2), (True, 14)):
+        undo = undo_actions(actions, moves=moves, flips=True)
+        pairs = {names[a.index]: names[u] for a, u in zip(actions, undo, strict=True)
+                 if u is not None}
+        assert pairs["flip left"] == "flip left" and pairs["flip right"] == "flip right"
+        assert len(pairs) == count
+    cube = action_table(compose_cfg("object=cube").primitives)
+    assert set(undo_actions(cube, moves=False, flips=True)) == {None}  # releases and lands

@@ -72,3 +72,9 @@ def test_an_evaluation_names_the_task_settings_its_policy_was_trained_with_other
     assert unlike_training(compose_cfg("task.no_undo=true", "task.filter=penalty"), trained) \
         == ["task.filter=mask (here: penalty)"]
     assert unlike_training(compose_cfg(), None) == []
+    # a setting the training left at its default and this run changes is named too
+    assert unlike_training(compose_cfg("task.no_undo=true", "task.no_undo_flip=true",
+                                       "task.max_actions=50", "task.reward_goal=1"),
+                           ["task.no_undo=true"]) \
+        == ["task.no_undo_flip=false (here: true)", "task.max_actions=200 (here: 50)"]
+    assert unlike_training(compose_cfg(), []) == []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import enum
 import importlib.metadata
@@ -14,6 +15,8 @@ from typing import Any
 
 import yaml
 from omegaconf import DictConfig, ListConfig, OmegaConf
+
+from inhand_exp.config import TaskConfig
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"  # the app's config tree
 PACKAGES = ("inhand-exp", "torch", "torchrl", "tensordict", "pybullet", "hydra-core",
@@ -88,24 +91,48 @@ def _same(a: Any, b: Any) -> bool:
     return a == b or str(a) == str(b)
 
 
+def _compared(key: str) -> bool:
+    """Whether a task setting counts in ``unlike_training``: not a reward (it does not change
+    what the policy sees or may do) and not where a cache is kept."""
+    return key.startswith("task.") and not key.startswith("task.reward_") \
+        and key != "task.route_cache_dir"
+
+
 def unlike_training(cfg: DictConfig, policy_overrides: Iterable[str] | None) -> list[str]:
     """The task settings a policy was trained with (``policy_overrides``, its ``trained_with``)
-    that ``cfg`` does not use, each as ``key=trained (here: now)``. Rewards are left out: they
+    that ``cfg`` does not use, each as ``key=trained (here: now)``: those the training set,
+    then those it left at their defaults and ``cfg`` sets otherwise. Rewards are left out: they
     do not change what the policy sees or may do. Evaluated otherwise, a policy meets a filter,
-    a time limit or an observation it did not learn with."""
-    unlike = []
-    for override in policy_overrides or ():
+    a time limit or an observation it did not learn with. A policy that records no
+    ``trained_with`` (None) has nothing to compare."""
+    if policy_overrides is None:
+        return []
+    unlike, seen = [], set()
+    for override in policy_overrides:
         key, sep, text = override.partition("=")
         key = key.lstrip("+~")
-        if not sep or not key.startswith("task.") or key.startswith("task.reward_") \
-                or key == "task.route_cache_dir":
+        if not sep or not _compared(key):
             continue
+        seen.add(key)
         try:
             trained = yaml.safe_load(text)
         except yaml.YAMLError:
             trained = text
         now = _plain(OmegaConf.select(cfg, key, default=None))
         if not _same(trained, now):
-            shown = str(now).lower() if isinstance(now, bool) else now
-            unlike.append(f"{key}={text} (here: {shown})")
+            unlike.append(f"{key}={text} (here: {_shown(now)})")
+    for name, field in TaskConfig.__dataclass_fields__.items():
+        key = f"task.{name}"
+        if key in seen or not _compared(key):
+            continue
+        default = _plain(field.default_factory() if field.default is dataclasses.MISSING
+                         else field.default)
+        now = _plain(OmegaConf.select(cfg, key, default=None))
+        if now is not None and not _same(default, now):
+            unlike.append(f"{key}={_shown(default)} (here: {_shown(now)})")
     return unlike
+
+
+def _shown(value: Any) -> Any:
+    """A value as an override writes it (booleans in lower case)."""
+    return str(value).lower() if isinstance(value, bool) else value

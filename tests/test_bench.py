@@ -42,6 +42,18 @@ def test_the_perturbed_section_runs_every_pole_primitive_on_every_perturbation(c
     assert all(thinner[p]["success_rate"] > 0 for p in ("slide", "flip_left", "flip_right"))
 
 
+def test_the_perturbed_section_runs_the_settings_and_primitives_asked_for(capsys):
+    main(["primitives", "--only", "perturbed,flip_right", "--perturbations",
+          "thinner,noise=paper", "--trials", "1"])
+    out = last_json(capsys)
+    assert set(out["results"]) == {"flip_right"}  # the nominal section named, too
+    assert {k: set(v) for k, v in out["perturbed"].items()} == {
+        "thinner": {"flip_right"}, "noise=paper": {"flip_right"}}
+    with pytest.raises(SystemExit):
+        main(["primitives", "--only", "perturbed", "--perturbations", "thiner"])
+    assert "unknown thiner" in capsys.readouterr().err
+
+
 def test_reposes_stay_allowed_on_a_thinner_pole():
     """The nominal model checks each finger's links against the face where its tip touches:
     checked against the nominal face, 5 mm outside a thinner pole's, the distal links seemed to

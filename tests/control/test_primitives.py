@@ -31,6 +31,7 @@ from inhand_exp.control.repose import (
     ROLL_REACH,
     GraspPlan,
     Repose,
+    found_model,
     rolled_levers,
     strict_hold,
 )
@@ -595,6 +596,56 @@ def test_flip_lands_on_the_real_face_of_a_wider_or_narrower_pole(nominal_model, 
     assert out.reason == "done", out
     up_after = pushes_right(world)
     assert set(up_after) == {0, 1, 2} and up_after[finger] != up_before[finger]
+
+
+@pytest.mark.parametrize("perturb", WIDTHS, ids=[p.name for p in WIDTHS])
+def test_the_pole_is_as_wide_as_its_fingertips_find_it(nominal_model, make_world, perturb):
+    """``found_model`` takes the width from where the tips touch the long faces (within a
+    millimetre: the tips press into the surface); the length and the mass stay nominal."""
+    world = perturbed_world(make_world, BEND, X0, perturb)
+    found = found_model(nominal_model, BEND, observe(world))
+    true_width = nominal_model.shape.width_m * perturb.width_scale
+    assert abs(found.shape.width_m - true_width) < 1e-3, found.shape
+    assert (found.shape.length_m, found.shape.mass_kg) == (nominal_model.shape.length_m,
+                                                           nominal_model.shape.mass_kg)
+    lone_only = Contacts(BEND.posture, BEND.coords, (False, False, True))
+    assert found_model(nominal_model, lone_only, observe(world)) is nominal_model  # one face
+    assert nominal_model.widened(-1.0).shape.width_m == 0.25 * nominal_model.shape.width_m
+
+
+# Flips of finger 2 that dropped a pole half as wide as modelled (bench trials): the pair and
+# the lone finger pinch it near one height, and the landing the nominal width judged firm left
+# the three tips a torque only the friction across the faces could hold, on half the lever.
+THIN_FLIPS = [((L, R, R), (-0.125, -0.116, -0.155), (0.031, 0.389, -0.139)),
+              ((L, R, R), (-0.205, -0.213, -0.140), (-0.003, 0.407, 0.045)),
+              ((L, R, L), (-0.120, -0.129, -0.190), (-0.028, 0.418, 0.157))]
+
+
+@pytest.mark.parametrize(("faces", "coords", "pose"), THIN_FLIPS, ids=["refused", "1", "2"])
+def test_a_flip_judges_its_landing_on_the_width_its_tips_find(nominal_model, make_world,
+                                                              monkeypatch, faces, coords, pose):
+    """Judged on the nominal width, these landings drop the thinner pole once the flipped tip
+    takes its share; judged on the width where the tips find the faces (``found_model``), the
+    flip lands where the grasp holds, or is refused with nothing moved."""
+    import inhand_exp.control.flip as flip_module
+
+    thinner = next(p for p in WIDTHS if p.width_scale < 1)
+    contacts, pose = Contacts(Posture(faces), coords), np.array(pose)
+    world = perturbed_world(make_world, contacts, pose, thinner)
+    with monkeypatch.context() as m:
+        m.setattr(flip_module, "found_model", lambda model, contacts, obs: model)
+        out = execute(world, Flip(nominal_model, contacts, 2, FLIP_S))
+    assert out.reason == "lost_contact", out
+    world = perturbed_world(make_world, contacts, pose, thinner)
+    before = snapshot(world)
+    out = execute(world, Flip(nominal_model, contacts, 2, FLIP_S))
+    if out.reason == "infeasible":
+        assert "no landing" in out.detail, out
+        assert_untouched(world, before, out)
+    else:
+        assert out.reason == "done", out
+        assert touching(world) == {0, 1, 2}
+        assert pushes_right(world)[2] == (faces[2] == R)  # on the other face now
 
 
 @pytest.mark.parametrize("finger", sorted(FLIP_SETUPS))

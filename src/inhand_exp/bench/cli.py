@@ -2,7 +2,8 @@
 
     inhand-bench speed [--object pole|cube] [--seconds S] [overrides...]
     inhand-bench primitives [--object pole|cube] [--trials N] [--seed S] [--workers W]
-                            [--only hold,repose,...] [overrides...]
+                            [--only hold,repose,...,perturbed] [--perturbations thinner,...]
+                            [overrides...]
     inhand-bench env [--workers W] [--steps N] [--seed S] [overrides...]
     inhand-bench graph [learner.resolution_m=M learner.resolution_rad=R ...]
     inhand-bench flips [--trials N] [--seed S] [overrides...]
@@ -121,10 +122,14 @@ def primitives(args, cfg: DictConfig) -> dict:
                 _print_row(name, res)
         if "perturbed" in only and cfg.object.name == "pole":
             settings = [(p, (0.0, 0.0)) for p in PERTURBATIONS] + [("none", noise_paper)]
+            # the primitives named in --only, if any; the settings named in --perturbations
+            named = [p for p in PERTURBED_PRIMITIVES if p in only] or PERTURBED_PRIMITIVES
             for setting in settings:
                 label = setting[0] if setting[0] != "none" else "noise=paper"
+                if args.perturbations and label not in args.perturbations.split(","):
+                    continue
                 out["perturbed"][label] = {}
-                for name in PERTURBED_PRIMITIVES:
+                for name in named:
                     n = count("perturbed_flip" if name.startswith("flip") else "perturbed")
                     res = run_section(pool, cfg, setting, name, n, args.seed)
                     out["perturbed"][label][name] = res
@@ -202,6 +207,10 @@ def main(argv: list[str] | None = None) -> None:
                         help="torques: random mid-level actions whose torques are recorded; "
                              "fingerprint: random allowed actions played")
     parser.add_argument("--only", default="", help="comma-separated sections")
+    parser.add_argument("--perturbations", default="",
+                        help="primitives: the perturbed section's settings, comma-separated "
+                             f"(default all: {','.join([*PERTURBATIONS, 'noise=paper'])}); "
+                             "primitives named in --only restrict its primitives")
     parser.add_argument("--pairs", type=int, default=20,
                         help="goals: pairs drawn per group; reach: test pairs checked")
     parser.add_argument("--run", default=None,
@@ -223,6 +232,10 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_intermixed_args(argv)
     if args.trials is not None and args.trials <= 0:
         parser.error(f"--trials must be > 0, got {args.trials}")
+    unknown = set(filter(None, args.perturbations.split(","))) - {*PERTURBATIONS, "noise=paper"}
+    if unknown:
+        parser.error(f"--perturbations: unknown {', '.join(sorted(unknown))}; known: "
+                     f"{', '.join([*PERTURBATIONS, 'noise=paper'])}")
     if args.pairs <= 0:
         parser.error(f"--pairs must be > 0, got {args.pairs}")
     if args.actions <= 0:

@@ -30,6 +30,7 @@ from inhand_exp.control.repose import (
     GraspPlan,
     face_gaps,
     follow_qdd,
+    found_model,
     landing_span,
     object_wrench,
     plan_for,
@@ -216,7 +217,8 @@ class Flip:
         """The landing coordinate and the finger's joint path, nearest the present first."""
         model, i = self.model, self.finger
         pose, R = obs.pose, rotation(obs.pose[2])
-        span = landing_span(model, self.contacts, i, OPPOSITE[face], self.gains, firm=True)
+        self.found = found_model(model, self.contacts, obs)  # the landing is judged on it
+        span = landing_span(self.found, self.contacts, i, OPPOSITE[face], self.gains, firm=True)
         if span is None:
             return None
         q0 = obs.q[2 * i:2 * i + 2].copy()
@@ -268,7 +270,7 @@ class Flip:
                                      pose, R, model.clearance, prefer=branch,
                                      check_pose=at_new)
             if q_hover is None or not space.ok(q_hover) or not holds_firmly(
-                    model, self.contacts, i, new_face, coord, span, self.gains):
+                    self.found, self.contacts, i, new_face, coord, span, self.gains):
                 continue
             tries += 1
             way = plan_joint_path(space, q_lift, q_hover)

@@ -79,6 +79,16 @@ class HandModel:
                          self.shape.mass_kg)
         return dataclasses.replace(self, shape=shape)
 
+    def widened(self, extra_m: float) -> HandModel:
+        """The same hand with the object ``extra_m`` wider at each long face (negative:
+        thinner), to plan on the faces where the fingertips find them; never under a quarter
+        of the nominal width."""
+        if extra_m == 0:
+            return self
+        width = max(self.shape.width_m + 2 * extra_m, 0.25 * self.shape.width_m)
+        shape = BoxShape(self.shape.length_m, width, self.shape.mass_kg)
+        return dataclasses.replace(self, shape=shape)
+
     def tip_targets(self, contacts: Contacts, pose: np.ndarray) -> np.ndarray:
         """Fingertip centres (3, 2) touching the object at ``contacts`` when it is at ``pose``."""
         pts, nrm = contact_frames(self.shape, contacts, pose)

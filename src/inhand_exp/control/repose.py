@@ -21,6 +21,7 @@ from inhand_exp.control.finger import FingerTerms
 from inhand_exp.control.forces import Squeeze, has_strict_squeeze, squeeze_margin, strict_span
 from inhand_exp.control.grasp import (
     Contacts,
+    Face,
     contact_frames,
     cross2,
     face_axes,
@@ -132,6 +133,24 @@ def face_gaps(model: HandModel, contacts, obs) -> tuple[float, ...]:
     if obs.plans is not None:
         obs.plans[key] = gaps
     return gaps
+
+
+def found_model(model: HandModel, contacts, obs) -> HandModel:
+    """``model`` with a pole as wide as its fingertips find it (``face_gaps``: the mean gap of
+    the touching tips on each long face). A grasp planned for after a move (a slide's end, a
+    flip's landing) is judged on it: on a pole thinner than modelled the friction's lever is
+    shorter, and a grasp the nominal width holds may not hold it. A cube, or a pole with a long
+    face no tip touches, keeps the nominal model."""
+    if model.shape.length_m <= 2 * model.shape.width_m:
+        return model
+    gaps = face_gaps(model, contacts, obs)
+    per: dict[Face, list[float]] = {Face.LEFT: [], Face.RIGHT: []}
+    for j, face in enumerate(contacts.posture.faces):
+        if contacts.active[j] and face in per:
+            per[face].append(gaps[j])
+    if not all(per.values()):
+        return model
+    return model.widened(0.5 * sum(sum(g) / len(g) for g in per.values()))
 
 
 def strict_hold(model: HandModel, contacts: Contacts, gains: PrimitivesConfig,

@@ -23,6 +23,7 @@ from inhand_exp.control.hand import HandModel
 from inhand_exp.control.repose import (
     GraspPlan,
     at_rest,
+    found_model,
     grasp_torques,
     min_jerk_1d,
     object_wrench,
@@ -118,7 +119,8 @@ class Slide:
                                self.max_push)
         if refused:
             return refused
-        if not strict_hold(model, c.moved(i, coord=self.c1), self.gains, firm=True):
+        if not strict_hold(found_model(model, c, obs), c.moved(i, coord=self.c1), self.gains,
+                           firm=True):
             return f"the grasp after the slide of finger {i} cannot hold the object firmly"
         self.origin = obs.pose.copy()
         return None

@@ -121,8 +121,8 @@ def unlike_training(cfg: DictConfig, policy_overrides: Iterable[str] | None) -> 
         now = _plain(OmegaConf.select(cfg, key, default=None))
         if not _same(trained, now):
             unlike.append(f"{key}={text} (here: {_shown(now)})")
-    for name, field in TaskConfig.__dataclass_fields__.items():
-        key = f"task.{name}"
+    for field in dataclasses.fields(TaskConfig):
+        key = f"task.{field.name}"
         if key in seen or not _compared(key):
             continue
         default = _plain(field.default_factory() if field.default is dataclasses.MISSING

@@ -28,7 +28,7 @@ from inhand_exp.control.handover import blended_forces, hover
 from inhand_exp.control.joint_path import FreeSpace, JointPath, arrival_times, plan_joint_path
 from inhand_exp.control.repose import (
     GraspPlan,
-    face_gaps,
+    face_gap,
     follow_qdd,
     found_model,
     landing_span,
@@ -123,16 +123,6 @@ def landed(model: HandModel, finger: int, face: Face, coord: float, obs, tol_m: 
     if abs(gap) <= tol_m and abs(at - coord) <= tol_m:
         return None
     return f"finger {finger} {gap * 1e3:.1f} mm off {face.name.lower()} at {at:+.3f} m"
-
-
-def face_gap(model: HandModel, contacts: Contacts, face: Face, obs,
-             exclude: int | None = None) -> float:
-    """Where ``face`` is found, off the nominal one (m, outward positive): the mean gap of the
-    fingertips that touch it (0 if none does). A thinner object, or an error in the observed
-    pose, shows here as the fingers' own positions."""
-    gaps = [g for j, g in enumerate(face_gaps(model, contacts, obs))
-            if j != exclude and contacts.active[j] and contacts.posture.faces[j] == face]
-    return float(np.mean(gaps)) if gaps else 0.0
 
 
 def ik_clear(model: HandModel, finger: int, point_O: np.ndarray, pose: np.ndarray,

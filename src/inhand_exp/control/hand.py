@@ -204,3 +204,8 @@ class HandModel:
         coords = tuple(self.shape.coord_of(f, t) for f, t in zip(contacts.posture.faces, tips_O,
                                                                  strict=True))
         return Contacts(contacts.posture, coords, contacts.active)
+
+
+def elongated(model: HandModel) -> bool:
+    """True for a pole-like object: its grasps use the two long faces only."""
+    return model.shape.length_m > 2 * model.shape.width_m

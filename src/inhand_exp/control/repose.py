@@ -29,7 +29,7 @@ from inhand_exp.control.grasp import (
     grasp_matrix,
     rotation,
 )
-from inhand_exp.control.hand import HandModel
+from inhand_exp.control.hand import HandModel, elongated
 
 
 @dataclass(frozen=True)
@@ -135,22 +135,27 @@ def face_gaps(model: HandModel, contacts, obs) -> tuple[float, ...]:
     return gaps
 
 
+def face_gap(model: HandModel, contacts: Contacts, face: Face, obs,
+             exclude: int | None = None) -> float:
+    """Where ``face`` is found, off the nominal one (m, outward positive): the mean gap of the
+    fingertips that touch it (0 if none does). A thinner object, or an error in the observed
+    pose, shows here as the fingers' own positions."""
+    gaps = [g for j, g in enumerate(face_gaps(model, contacts, obs))
+            if j != exclude and contacts.active[j] and contacts.posture.faces[j] == face]
+    return float(np.mean(gaps)) if gaps else 0.0
+
+
 def found_model(model: HandModel, contacts, obs) -> HandModel:
-    """``model`` with a pole as wide as its fingertips find it (``face_gaps``: the mean gap of
-    the touching tips on each long face). A grasp planned for after a move (a slide's end, a
-    flip's landing) is judged on it: on a pole thinner than modelled the friction's lever is
-    shorter, and a grasp the nominal width holds may not hold it. A cube, or a pole with a long
-    face no tip touches, keeps the nominal model."""
-    if model.shape.length_m <= 2 * model.shape.width_m:
+    """``model`` with a pole as wide as its fingertips find it (``face_gap`` of each long face).
+    A grasp planned for after a move (a slide's end, a flip's landing) is judged on it: on a
+    pole thinner than modelled the friction's lever is shorter, and a grasp the nominal width
+    holds may not hold it. A cube, or a pole with a long face no tip touches, keeps the nominal
+    model."""
+    touched = {f for f, on in zip(contacts.posture.faces, contacts.active, strict=True) if on}
+    if not elongated(model) or not {Face.LEFT, Face.RIGHT} <= touched:
         return model
-    gaps = face_gaps(model, contacts, obs)
-    per: dict[Face, list[float]] = {Face.LEFT: [], Face.RIGHT: []}
-    for j, face in enumerate(contacts.posture.faces):
-        if contacts.active[j] and face in per:
-            per[face].append(gaps[j])
-    if not all(per.values()):
-        return model
-    return model.widened(0.5 * sum(sum(g) / len(g) for g in per.values()))
+    return model.widened(0.5 * (face_gap(model, contacts, Face.LEFT, obs)
+                                + face_gap(model, contacts, Face.RIGHT, obs)))
 
 
 def strict_hold(model: HandModel, contacts: Contacts, gains: PrimitivesConfig,

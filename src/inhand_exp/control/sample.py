@@ -15,7 +15,7 @@ import numpy as np
 
 from inhand_exp.config import PrimitivesConfig
 from inhand_exp.control.grasp import Contacts, Face, Posture, face_axes, rotation
-from inhand_exp.control.hand import GeometryError, HandModel
+from inhand_exp.control.hand import GeometryError, HandModel, elongated
 from inhand_exp.control.repose import strict_hold
 
 
@@ -34,11 +34,6 @@ class Workspace:
 
     def draw(self, rng: np.random.Generator) -> np.ndarray:
         return rng.uniform(self.low, self.high)
-
-
-def elongated(model: HandModel) -> bool:
-    """True for a pole-like object: its grasps use the two long faces only."""
-    return model.shape.length_m > 2 * model.shape.width_m
 
 
 def holds_at(model: HandModel, contacts: Contacts, pose: np.ndarray, press: float = 0.0,

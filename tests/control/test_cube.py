@@ -144,3 +144,40 @@ def test_land_refuses_a_finger_in_contact(cube_model, cube_world):
     contacts, finger, _ = releasable(cube_model, cube_world, 10)
     out = execute(cube_world, Land(cube_model, contacts, finger, 1.5))
     assert out.reason == "infeasible" and "already in contact" in out.detail
+
+
+def test_a_free_finger_holds_still_while_the_others_turn_the_cube(cube_model, cube_world):
+    """The cube study's start (bottom finger off centre), its bottom finger released, then the
+    cube turned 0.5 rad on the side fingers: the free finger holds its joints where the release
+    left it (it used to fall limp to its joint limits, from where no landing reached the cube),
+    the cube is never touched by it, and it lands again on another face."""
+    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.RIGHT)), (0.005, 0.025, 0.015))
+    pose = np.array([0.0, 0.25, 0.0])
+    cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
+    release = Release(cube_model, contacts, 1, 1.0)
+    assert execute(cube_world, release).reason == "done"
+    held = contacts.moved(1, active=False)
+    q_free = cube_world.joint_state()[0][2:4]
+    for _ in range(5):
+        out = execute(cube_world, Repose(cube_model, held, np.array([0.0, 0.0, -0.1]), 0.5))
+        assert out.reason == "done", out
+        assert np.abs(cube_world.joint_state()[0][2:4] - q_free).max() < 0.02
+        assert touching(cube_world) == {0, 2}
+    assert cube_world.object_pose()[2] < -0.4
+    land = Land(cube_model, held, 1, 1.5)
+    out = execute(cube_world, land)
+    assert out.reason == "done", out
+    assert land.face != Face.BOTTOM and touching(cube_world) == {0, 1, 2}
+
+
+def test_a_turn_into_the_free_finger_is_refused(cube_model, cube_world):
+    """A move that would bring the cube within the clearance of the released finger is refused
+    before any step."""
+    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.RIGHT)), (0.005, 0.025, 0.015))
+    pose = np.array([0.0, 0.25, 0.0])
+    cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
+    assert execute(cube_world, Release(cube_model, contacts, 1, 1.0)).reason == "done"
+    held = contacts.moved(1, active=False)
+    out = execute(cube_world, Repose(cube_model, held, np.array([0.0, -0.03, 0.0]), 0.5))
+    assert out.reason == "infeasible" and out.steps == 0, out
+    assert "free finger 1" in out.detail

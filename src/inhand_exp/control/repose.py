@@ -379,11 +379,20 @@ def grasp_torques(model: HandModel, plan: GraspPlan, lam: np.ndarray, acc: np.nd
     return tau
 
 
+FREE_KP, FREE_KD = 900.0, 60.0  # joint gains (1/s^2, 1/s) of a free finger holding still
+_ZERO2 = np.zeros(2)
+
+
 class Repose:
     """Primitive: move the object by ``delta`` (dx, dz, dtheta) keeping every contact.
 
     The reference moves along a minimum-jerk path for ``move_fraction`` of the duration, then
     holds still so the object settles. ``Repose(model, contacts, zeros, T)`` is a hold.
+
+    A finger out of contact (a cube's released finger) holds its joints where they are, out of
+    the object's way: a move that would bring the object within ``model.clearance`` of it is
+    refused. Left limp, it fell to its joint limits, from where no landing could reach the
+    object again.
     """
 
     def __init__(self, model: HandModel, contacts, delta: np.ndarray, duration_s: float,
@@ -422,6 +431,14 @@ class Repose:
                 return f"finger {i}'s links would cut into the object at the target pose"
             q_end[i] = qi
         self.q_end = q_end  # each finger's joints at the target pose, as planned
+        self.free = [i for i in range(3) if not self.contacts.active[i]]
+        self.q_free = obs.q.copy()
+        for i in self.free:
+            qi = self.q_free[2 * i:2 * i + 2]
+            for s in (0.5, 1.0):
+                if self.model.finger_gap(i, qi, self.origin + s * self.delta) < \
+                        self.model.clearance:
+                    return f"free finger {i} would be in the object's way"
         return self._ends_firm(obs, q_end)
 
     def _ends_firm(self, obs, q_end: dict[int, np.ndarray]) -> str | None:
@@ -454,5 +471,11 @@ class Repose:
 
     def torques(self, obs) -> np.ndarray | None:
         ref = min_jerk(self.origin, self.goal, self.move_s, obs.t)
-        return repose_torques(self.model, self.plan, self.gains, obs.q, obs.qd, obs.pose,
-                              obs.twist, ref)
+        tau = repose_torques(self.model, self.plan, self.gains, obs.q, obs.qd, obs.pose,
+                             obs.twist, ref)
+        if tau is not None:
+            for i in self.free:  # hold still where it is
+                j = slice(2 * i, 2 * i + 2)
+                qdd = FREE_KP * (self.q_free[j] - obs.q[j]) - FREE_KD * obs.qd[j]
+                tau[j] = push_torque(self.model, i, obs.q, obs.qd, qdd, _ZERO2, _ZERO2)
+        return tau

@@ -144,6 +144,8 @@ def test_impossible_values_name_field_and_value(compose_cfg, override, message):
     (["object=cube", "primitives=pole"], "primitives=pole does not fit object=cube"),
     (["primitives.repose_duration_s=0.501"], "not a whole number of control periods"),
     (["mode=eval"], "mode=eval needs checkpoint=PATH"),
+    (["object=cube", "learner=search", "mode=eval"],
+     "learner=search plans over a pole's two long faces; it has no graph for object=cube"),
     (["object=cube", "goals.train_groups=[medium,lone]"],
      "'lone' (a pole's lone finger ending lower) has no pairs for object=cube"),
     (["learner.frames_per_batch=100"],

@@ -481,6 +481,10 @@ def _check_consistency(cfg: DictConfig) -> None:
     if "lone" in cfg.goals.train_groups and cfg.object.name != "pole":
         raise ConfigError(f"goals.train_groups: 'lone' (a pole's lone finger ending lower) "
                           f"has no pairs for object={cfg.object.name}")
+    if cfg.learner.name == "search" and cfg.object.length_m <= 2 * cfg.object.width_m:
+        raise ConfigError(f"learner=search plans over a pole's two long faces; it has no graph "
+                          f"for object={cfg.object.name} (length_m={cfg.object.length_m} is "
+                          f"not more than twice width_m={cfg.object.width_m})")
     if cfg.object.name != cfg.primitives.name:
         raise ConfigError(f"primitives={cfg.primitives.name} does not fit object="
                           f"{cfg.object.name}; choose primitives={cfg.object.name}")

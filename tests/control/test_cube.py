@@ -181,3 +181,23 @@ def test_a_turn_into_the_free_finger_is_refused(cube_model, cube_world):
     out = execute(cube_world, Repose(cube_model, held, np.array([0.0, -0.03, 0.0]), 0.5))
     assert out.reason == "infeasible" and out.steps == 0, out
     assert "free finger 1" in out.detail
+
+
+def test_a_turn_the_grasp_cannot_hold_at_its_end_is_refused(cube_model, cube_world):
+    """On two tips at a corner (the study's start without its right finger) the cube turns
+    -0.1 rad at a time until gravity, turned in the cube's frame, leaves the pair no forces
+    that hold it at the next angle: that turn is refused before any step (it used to be taken,
+    and the cube fell), and the cube was never dropped on the way."""
+    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.RIGHT)), (0.005, 0.025, 0.015))
+    pose = np.array([0.0, 0.25, 0.0])
+    cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
+    assert execute(cube_world, Release(cube_model, contacts, 2, 1.0)).reason == "done"
+    held = contacts.moved(2, active=False)
+    for _ in range(8):
+        out = execute(cube_world, Repose(cube_model, held, np.array([0.0, 0.0, -0.1]), 0.5))
+        assert not out.dropped, out
+        if out.reason == "infeasible":
+            break
+        assert out.reason == "done", out
+    assert out.steps == 0 and "at the target angle" in out.detail, out
+    assert cube_world.object_pose()[2] < -0.25 and cube_world.grasp_lost() is None

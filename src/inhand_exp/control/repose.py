@@ -416,6 +416,12 @@ class Repose:
         self.goal = self.origin + self.delta
         if self.model.palm_gap(self.goal) < self.model.clearance:
             return "the object would come down onto the palm"
+        if self.delta[2]:  # gravity turns in the object's frame: the grasp must hold there too
+            _, w_end = object_wrench(self.model, self.gains, self.goal, np.zeros(3),
+                                     (self.goal, np.zeros(3), np.zeros(3)))
+            if self.plan.squeeze.solve(w_end) is None:
+                return "no contact forces inside the friction cones hold the object at the " \
+                       "target angle"
         R = rotation(self.goal[2])
         gaps = face_gaps(self.model, self.contacts, obs)
         q_end = {}

@@ -389,6 +389,10 @@ class Repose:
     The reference moves along a minimum-jerk path for ``move_fraction`` of the duration, then
     holds still so the object settles. ``Repose(model, contacts, zeros, T)`` is a hold.
 
+    A turn is refused when the grasp's forces cannot hold the object at the target angle:
+    gravity turns in the object's frame, and a grasp that holds at the start may not (a cube
+    on two tips at a corner fell so).
+
     A finger out of contact (a cube's released finger) holds its joints where they are, out of
     the object's way: a move that would bring the object within ``model.clearance`` of it is
     refused. Left limp, it fell to its joint limits, from where no landing could reach the

@@ -146,14 +146,21 @@ def test_land_refuses_a_finger_in_contact(cube_model, cube_world):
     assert out.reason == "infeasible" and "already in contact" in out.detail
 
 
+def study_start(model: HandModel, world: World) -> Contacts:
+    """The cube study's start (``goals.x0=[0, 0.25, 0]``, its grasp drawn from the default goal
+    seed: bottom finger 2.5 cm off centre), set in ``world``."""
+    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.RIGHT)), (0.005, 0.025, 0.015))
+    pose = np.array([0.0, 0.25, 0.0])
+    world.reset(pose, model.grasp_q(contacts, pose, press=0.0005))
+    return contacts
+
+
 def test_a_free_finger_holds_still_while_the_others_turn_the_cube(cube_model, cube_world):
     """The cube study's start (bottom finger off centre), its bottom finger released, then the
     cube turned 0.5 rad on the side fingers: the free finger holds its joints where the release
     left it (it used to fall limp to its joint limits, from where no landing reached the cube),
     the cube is never touched by it, and it lands again on another face."""
-    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.RIGHT)), (0.005, 0.025, 0.015))
-    pose = np.array([0.0, 0.25, 0.0])
-    cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
+    contacts = study_start(cube_model, cube_world)
     release = Release(cube_model, contacts, 1, 1.0)
     assert execute(cube_world, release).reason == "done"
     held = contacts.moved(1, active=False)
@@ -173,9 +180,7 @@ def test_a_free_finger_holds_still_while_the_others_turn_the_cube(cube_model, cu
 def test_a_turn_into_the_free_finger_is_refused(cube_model, cube_world):
     """A move that would bring the cube within the clearance of the released finger is refused
     before any step."""
-    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.RIGHT)), (0.005, 0.025, 0.015))
-    pose = np.array([0.0, 0.25, 0.0])
-    cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
+    contacts = study_start(cube_model, cube_world)
     assert execute(cube_world, Release(cube_model, contacts, 1, 1.0)).reason == "done"
     held = contacts.moved(1, active=False)
     out = execute(cube_world, Repose(cube_model, held, np.array([0.0, -0.03, 0.0]), 0.5))
@@ -188,9 +193,7 @@ def test_a_turn_the_grasp_cannot_hold_at_its_end_is_refused(cube_model, cube_wor
     -0.1 rad at a time until gravity, turned in the cube's frame, leaves the pair no forces
     that hold it at the next angle: that turn is refused before any step (it used to be taken,
     and the cube fell), and the cube was never dropped on the way."""
-    contacts = Contacts(Posture((Face.LEFT, Face.BOTTOM, Face.RIGHT)), (0.005, 0.025, 0.015))
-    pose = np.array([0.0, 0.25, 0.0])
-    cube_world.reset(pose, cube_model.grasp_q(contacts, pose, press=0.0005))
+    contacts = study_start(cube_model, cube_world)
     assert execute(cube_world, Release(cube_model, contacts, 2, 1.0)).reason == "done"
     held = contacts.moved(2, active=False)
     for _ in range(8):

@@ -272,6 +272,12 @@ class TaskConfig:
                               "the same flip (the object holds still in a flip and the finger "
                               "lands nearest where it was, so the second carries it back), "
                               "unless no other action is allowed; false: the paper's filter.")
+    no_repeat_contact: bool = spec(False, "The feasibility filter also refuses an action right "
+                                   "after it ended touching a link or the palm (outcome "
+                                   "link_contact: the controllers' model allowed a move the "
+                                   "real object does not fit, such as a longer pole's end "
+                                   "resting on the palm), unless no other action is allowed; "
+                                   "false: the paper's filter.")
     reward_goal: float = spec(5.0, "Reward on reaching the goal.")
     reward_invalid: float = spec(-0.01, "Reward of an infeasible action (penalty mode).")
     reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")

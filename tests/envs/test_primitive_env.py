@@ -260,3 +260,25 @@ def test_no_undo_refuses_the_opposite_of_the_last_action_only(compose_cfg):
     assert "repose -x" in allowed[0]
     assert allowed[1] == allowed[0] - {"repose -x"}
     assert envs[1].reset()["action_mask"].tolist() == envs[0].reset()["action_mask"].tolist()
+
+
+def test_no_repeat_contact_refuses_the_move_that_just_rested_the_pole_on_the_palm(compose_cfg):
+    """A pole 5 cm longer than the controllers' model: `repose -z` from this start rests its
+    real lower end on the palm (`link_contact`), the filter on the nominal ends allows it
+    again, and with the option it is refused right after, and only then."""
+    x0 = np.array([-0.0443, 0.2816, 0.0552])  # the start of a medium test pair
+    pair = GoalPair("medium", x0.copy(), np.array([-0.04, 0.226, -0.54]),
+                    Contacts(Posture((L, R, R)), (-0.095, -0.04, -0.12)))
+    masks = []
+    for overrides in ([], ["task.no_repeat_contact=true"]):
+        env = PrimitiveEnv(compose_cfg("perturb=longer", *overrides), goals=[pair], seed=0)
+        td = env.reset()
+        down = next(a.index for a in env.actions if a.name == "repose -z")
+        assert td["action_mask"][down]
+        td = env.step(td.set("action", torch.tensor(down)))["next"]
+        assert OUTCOMES[int(td["outcome"])] == "link_contact"
+        assert "palm" in env.world.hand_contacts()
+        masks.append(td["action_mask"].clone())
+    assert masks[0][down] and not masks[1][down]
+    masks[1][down] = True
+    assert torch.equal(masks[0], masks[1])  # nothing else refused

@@ -8,7 +8,8 @@ and the goal ``X_g`` (3), then with ``task.route_advice`` the search graph's vie
 observed state (``task.route.RouteAdvice``, 15 floats), then with ``task.posture_advice``
 whether the posture can hold the goal (``task.posture_advice.PostureAdvice``, 2 flags);
 ``action_mask`` says which actions the feasibility filter allows (with ``task.no_undo``, not the
-one that undoes the last; with ``task.no_undo_flip``, not the last flip again).
+one that undoes the last; with ``task.no_undo_flip``, not the last flip again; with
+``task.no_repeat_contact``, not the last action again when it ended touching a link or the palm).
 ``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
 with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
 into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made, the wall
@@ -76,6 +77,9 @@ class PrimitiveEnv(EnvBase):
         self.undoes = (undo_actions(self.actions, rules.no_undo, rules.no_undo_flip)
                        if rules.no_undo or rules.no_undo_flip else None)
         self.undo: int | None = None
+        # with task.no_repeat_contact: the last action, when it ended touching a link or the palm
+        self.no_repeat = bool(rules.no_repeat_contact)
+        self.repeat: int | None = None
         self.idle, self.last = False, None
         self.snapshots = None
         if states_hz > 0:
@@ -115,8 +119,9 @@ class PrimitiveEnv(EnvBase):
         self.mask, self.planned = feasibility(self.actions, self.model, self.contacts,
                                               self.prim, obs)
         self.wall[0] += time.perf_counter() - t
-        if self.undo is not None and self.mask[self.undo] and self.mask.sum() > 1:
-            self.mask[self.undo] = False  # task.no_undo: not straight back
+        for a in (self.undo, self.repeat):  # task.no_undo, task.no_repeat_contact
+            if a is not None and self.mask[a] and self.mask.sum() > 1:
+                self.mask[a] = False
         mask = self.mask if self.filter == "mask" else np.ones_like(self.mask)
         task = self.task
         parts = [obs.q, obs.qd, obs.pose, task.goal]
@@ -163,7 +168,7 @@ class PrimitiveEnv(EnvBase):
         pair = self.task.pair
         self.contacts = pair.contacts
         self.postures = {pair.contacts.posture}  # reached so far in this episode
-        self.undo = None
+        self.undo = self.repeat = None
         if self.snapshots is not None:
             self.snapshots.new_episode()
         false = False
@@ -197,6 +202,8 @@ class PrimitiveEnv(EnvBase):
             valid, outcome = out.reason != "infeasible", out.reason
             if self.undoes is not None:
                 self.undo = self.undoes[a] if out.ok else None
+            if self.no_repeat:  # the same move would meet the same link or palm again
+                self.repeat = a if out.reason == "link_contact" else None
             dropped = out.dropped  # from the simulated state, whatever the primitive says
             if out.reached and action.kind in ("flip", "release", "land"):
                 self.contacts = prim.result

@@ -128,6 +128,9 @@ class PrimitivesConfig:
     slide: bool = spec(True, "Offer the slide actions (6 for the pole).")
     flip: bool = spec(True, "Offer flip-left / flip-right (pole).")
     release_land: bool = spec(False, "Offer release / land per finger (cube).")
+    land_other_elbow: bool = spec(False, "With release_land, offer also a land per finger "
+                                  "that puts it down with its elbow on the other side, "
+                                  "nearest its mirror image (any face, the one it left too).")
     flip_end_margin_m: float = spec(0.025, "Room a flipping finger keeps round the object's "
                                     "ends beyond the nominal ones (m), for an object longer "
                                     "than modelled, whose ends no fingertip feels. Taken "
@@ -136,6 +139,9 @@ class PrimitivesConfig:
     repose_duration_s: float = spec(0.5, "Simulated time given to one repose (s).", gt=0)
     slide_duration_s: float = spec(0.5, "Simulated time given to one slide (s).", gt=0)
     flip_duration_s: float = spec(2.0, "Simulated time given to one flip (s).", gt=0)
+    release_lift_m: float = spec(0.025, "How far a release lifts the tip off its face (m). "
+                                 "A turning cube's corners sweep out to half its diagonal: "
+                                 "2.5 cm keeps a 10 cm cube's sweep off the free tip.", gt=0)
     release_duration_s: float = spec(1.0, "Simulated time given to one release (s).", gt=0)
     land_duration_s: float = spec(1.5, "Simulated time given to one land (s).", gt=0)
     settle_early: bool = spec(True, "End a repose or slide once it is past its move, within "

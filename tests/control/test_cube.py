@@ -177,6 +177,52 @@ def test_a_free_finger_holds_still_while_the_others_turn_the_cube(cube_model, cu
     assert land.face != Face.BOTTOM and touching(cube_world) == {0, 1, 2}
 
 
+def test_a_land_with_the_other_elbow_opens_the_other_quarter_turn(cube_model, cube_world):
+    """From the study's start the bottom finger's elbow is to the right of its tip, and its
+    links meet the cube when it turns -theta. Released and put down with the other elbow (its
+    joints go round through the straight finger, never touching the cube), it lands at its
+    mirror image, left of the face's centre; the left finger can then be released, and the
+    bottom and right fingers turn the cube a quarter turn the other way without dropping it."""
+    contacts = study_start(cube_model, cube_world)
+    assert cube_world.joint_state()[0][3] > 0  # the elbow to the right of the tip
+    assert Release(cube_model, contacts, 0, 1.0).start(observe(cube_world)) is not None
+    assert execute(cube_world, Release(cube_model, contacts, 1, 1.0)).reason == "done"
+    held = contacts.moved(1, active=False)
+    land = Land(cube_model, held, 1, 1.5, other_elbow=True)
+    out = execute(cube_world, land)
+    assert out.reason == "done", out
+    assert land.face == Face.BOTTOM and land.coord < -0.01
+    assert cube_world.joint_state()[0][3] < 0 and touching(cube_world) == {0, 1, 2}
+    assert np.abs(cube_world.object_pose() - [0.0, 0.25, 0.0]).max() < 0.01
+    grasp = land.result
+    assert execute(cube_world, Release(cube_model, grasp, 0, 1.0)).reason == "done"
+    pair = grasp.moved(0, active=False)
+    while cube_world.object_pose()[2] > -1.45:
+        out = execute(cube_world, Repose(cube_model, pair, np.array([0.0, 0.0, -0.1]), 0.5))
+        assert out.reason == "done" and not out.dropped, out
+        assert touching(cube_world) == {1, 2}
+    assert abs(cube_world.object_pose()[2] + 1.5) < 0.1
+
+
+def test_a_turn_that_would_sweep_a_corner_into_the_free_tip_is_refused(cube_model, cube_world):
+    """A cube's corners sweep out to half its diagonal as it turns. With the right finger
+    lifted only 2 cm off its face, its tip lies inside that sweep: the turns on the other two
+    stop before the corner reaches it, and the free finger is never touched (they used to go
+    on, brushing the corner past the tip; the release now lifts 2.5 cm and the turn goes
+    through, see ``test_a_land_with_the_other_elbow_opens_the_other_quarter_turn``)."""
+    contacts = study_start(cube_model, cube_world)
+    release = Release(cube_model, contacts, 2, 1.0, clearance_m=0.02)
+    assert execute(cube_world, release).reason == "done"
+    pair = contacts.moved(2, active=False)
+    for _ in range(15):
+        out = execute(cube_world, Repose(cube_model, pair, np.array([0.0, 0.0, 0.1]), 0.5))
+        assert 2 not in touching(cube_world)
+        if out.reason != "done":
+            break
+    assert out.reason == "infeasible" and "free finger 2" in out.detail, out
+    assert 0.5 < cube_world.object_pose()[2] < 0.9  # about where a corner points at it
+
+
 def test_a_turn_into_the_free_finger_is_refused(cube_model, cube_world):
     """A move that would bring the cube within the clearance of the released finger is refused
     before any step."""

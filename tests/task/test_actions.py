@@ -31,6 +31,16 @@ def test_cube_table_has_release_and_land_and_no_slides(compose_cfg):
     assert len(actions) == 12
 
 
+def test_cube_table_offers_lands_with_the_other_elbow_when_asked(compose_cfg):
+    actions = action_table(compose_cfg("object=cube", "primitives.land_other_elbow=true")
+                           .primitives)
+    assert len(actions) == 15
+    other = [a for a in actions if a.other_elbow]
+    assert [(a.kind, a.finger) for a in other] == [("land", 0), ("land", 1), ("land", 2)]
+    assert [a.index for a in other] == [12, 13, 14]  # the 12 actions keep their indices
+    assert other[1].name == "land finger 1 other elbow"
+
+
 def test_step_sizes_and_switches_come_from_the_config(compose_cfg):
     prim = compose_cfg("primitives.repose_dx_m=0.02", "primitives.repose_dtheta_rad=0.05",
                        "primitives.slide_dc_m=0.03", "primitives.flip=false").primitives

@@ -42,7 +42,8 @@ from inhand_exp.config import ConfigError, PerturbConfig, validate
 # Trials per section when --trials is not given: the targets of the physics milestone.
 DEFAULT_TRIALS = {"hold": 100, "repose": 1000, "slide": 500, "flip_left": 200,
                   "flip_right": 200, "flip_left_tilted": 10, "flip_right_tilted": 10,
-                  "perturbed": 200, "perturbed_flip": 50, "release": 200, "land": 200}
+                  "perturbed": 200, "perturbed_flip": 50, "release": 200, "land": 200,
+                  "land_other_elbow": 200}
 # What the perturbed section runs on each perturbed pole and under noise: every primitive the
 # pole's mid level uses (the controllers keep the nominal model).
 PERTURBED_PRIMITIVES = ("repose", "slide", "flip_left", "flip_right")
@@ -78,7 +79,8 @@ def _run_trial(cfg: DictConfig, setting: tuple, name: str, seed: int, index: int
                     "flip_right": partial(trials.flip, finger=2),
                     "flip_left_tilted": partial(trials.flip, finger=0, min_tilt=TILTED_RAD),
                     "flip_right_tilted": partial(trials.flip, finger=2, min_tilt=TILTED_RAD),
-                    "release": trials.release, "land": trials.land}[name]
+                    "release": trials.release, "land": trials.land,
+                    "land_other_elbow": partial(trials.land, other_elbow=True)}[name]
     return fn(bench, rng)
 
 
@@ -108,7 +110,7 @@ def primitives(args, cfg: DictConfig) -> dict:
     names = ["hold", "repose", "slide", "flip_left", "flip_right", "flip_left_tilted",
              "flip_right_tilted"]
     if cfg.object.name == "cube":
-        names = ["hold", "repose", "release", "land"]
+        names = ["hold", "repose", "release", "land", "land_other_elbow"]
     only = args.only.split(",") if args.only else names + ["perturbed"]
     count = (lambda s: args.trials) if args.trials else DEFAULT_TRIALS.get
     pool = ProcessPoolExecutor(args.workers) if args.workers > 1 else None

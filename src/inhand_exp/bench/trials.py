@@ -219,16 +219,19 @@ def release(b: Bench, rng: np.random.Generator) -> Trial | None:
                  time.perf_counter() - t)
 
 
-def land(b: Bench, rng: np.random.Generator) -> Trial | None:
+def land(b: Bench, rng: np.random.Generator, other_elbow: bool = False) -> Trial | None:
     """Land on another face after a successful release (the release itself is not scored
-    here)."""
+    here); with ``other_elbow``, on any face with the elbow on the other side, which it must
+    end with."""
     found = _releasable(b, rng)
     if found is None or not execute(b.world, found[1]).ok:
         return None
     finger, released = found
-    prim = Land(b.model, released.result, finger, b.prim.land_duration_s, b.prim)
+    prim = Land(b.model, released.result, finger, b.prim.land_duration_s, b.prim,
+                other_elbow=other_elbow)
     if not _feasible(prim, b.observe()):
         return None
+    elbow = b.world.joint_state()[0][2 * finger + 1] >= 0
     start = b.world.object_pose()
     t = time.perf_counter()
     out = execute(b.world, prim, b.offset(rng))
@@ -239,5 +242,7 @@ def land(b: Bench, rng: np.random.Generator) -> Trial | None:
     on_face = any(c.finger == finger and float(c.normal @ inward) > 0.95
                   for c in b.world.contacts())
     ok = out.ok and len(b.faces()) == 3 and on_face
+    if other_elbow:
+        ok = ok and (b.world.joint_state()[0][2 * finger + 1] >= 0) != elbow
     return Trial(ok, out.dropped, em, er, out.sim_time_s,
                  time.perf_counter() - t)

@@ -14,7 +14,8 @@ import math
 import numpy as np
 
 
-def _point_box(x: float, z: float, hx: float, hz: float) -> float:
+def point_box_distance(x: float, z: float, hx: float, hz: float) -> float:
+    """Distance (m) from point (x, z) to the box ``|x| <= hx, |z| <= hz``; 0 inside it."""
     ex, ez = max(abs(x) - hx, 0.0), max(abs(z) - hz, 0.0)
     return math.hypot(ex, ez)
 
@@ -33,7 +34,7 @@ def segment_box_distance(ax: float, az: float, bx: float, bz: float, hx: float, 
     if (max(ax, bx) >= -hx and min(ax, bx) <= hx and max(az, bz) >= -hz and min(az, bz) <= hz
             and abs(dz * ax - dx * az) <= abs(dz) * hx + abs(dx) * hz):
         return 0.0
-    best = min(_point_box(ax, az, hx, hz), _point_box(bx, bz, hx, hz))
+    best = min(point_box_distance(ax, az, hx, hz), point_box_distance(bx, bz, hx, hz))
     n = dx * dx + dz * dz
     for cx in (-hx, hx):
         ex = cx - ax

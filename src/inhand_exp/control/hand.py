@@ -11,6 +11,7 @@ import numpy as np
 from inhand_exp.config import HandConfig, ObjectConfig
 from inhand_exp.control.clearance import (
     lowest_corner,
+    point_box_distance,
     segment_box_distance,
     segment_box_distances,
     to_object,
@@ -144,6 +145,14 @@ class HandModel:
         hx, hz = self.shape.half_x, self.shape.half_z
         return min(segment_box_distance(*b, *e, hx, hz),
                    segment_box_distance(*e, *t, hx, hz)) - self.link_radius
+
+    def free_finger_gap(self, i: int, qi: np.ndarray, pose: np.ndarray) -> float:
+        """``finger_gap`` of a finger out of contact: its tip's sphere must keep the air too."""
+        tip = self.fingers[i].tip(qi)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        x, z = to_object(float(tip[0]), float(tip[1]), float(pose[0]), float(pose[1]), c, s)
+        air = point_box_distance(x, z, self.shape.half_x, self.shape.half_z) - self.tip_radius
+        return min(self.finger_gap(i, qi, pose), air)
 
     def finger_gaps(self, i: int, Q: np.ndarray, pose: np.ndarray) -> np.ndarray:
         """``finger_gap`` for many joint angles ``Q`` (n, 2) of finger ``i`` at once."""

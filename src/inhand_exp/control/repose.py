@@ -394,9 +394,9 @@ class Repose:
     on two tips at a corner fell so).
 
     A finger out of contact (a cube's released finger) holds its joints where they are, out of
-    the object's way: a move that would bring the object within ``model.clearance`` of it is
-    refused. Left limp, it fell to its joint limits, from where no landing could reach the
-    object again.
+    the object's way: a move that would bring the object within ``model.clearance`` of it (its
+    links or its tip) is refused. Left limp, it fell to its joint limits, from where no landing
+    could reach the object again.
     """
 
     def __init__(self, model: HandModel, contacts, delta: np.ndarray, duration_s: float,
@@ -446,7 +446,7 @@ class Repose:
         for i in self.free:
             qi = self.q_free[2 * i:2 * i + 2]
             for s in (0.5, 1.0):
-                if self.model.finger_gap(i, qi, self.origin + s * self.delta) < \
+                if self.model.free_finger_gap(i, qi, self.origin + s * self.delta) < \
                         self.model.clearance:
                     return f"free finger {i} would be in the object's way"
         return self._ends_firm(obs, q_end)

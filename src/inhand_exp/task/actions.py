@@ -1,7 +1,8 @@
 """The discrete mid-level actions (paper Table I), generated from the ``primitives`` config.
 
 Pole: repose +-x, +-z, +-theta; slide +-dC for each finger; flip left (finger 0) and flip right
-(finger 2): 14 actions. Cube: the 6 reposes, then release and land for each finger: 12 actions.
+(finger 2): 14 actions. Cube: the 6 reposes, then release and land for each finger: 12 actions;
+with ``land_other_elbow``, then a land with the elbow on the other side for each finger: 15.
 Each action becomes a fresh primitive for the current contact configuration; a primitive's
 ``start`` is its own feasibility check (inverse kinematics, joint limits, force distribution).
 """
@@ -33,6 +34,7 @@ class Action:
     delta: tuple[float, float, float] = (0.0, 0.0, 0.0)  # repose: (dx m, dz m, dtheta rad)
     finger: int = -1
     dc: float = 0.0  # slide: m along the face
+    other_elbow: bool = False  # land: with the elbow on the other side
 
 
 def action_table(prim) -> tuple[Action, ...]:
@@ -52,6 +54,9 @@ def action_table(prim) -> tuple[Action, ...]:
     if prim.release_land:
         specs += [dict(kind="release", name=f"release finger {i}", finger=i) for i in range(3)]
         specs += [dict(kind="land", name=f"land finger {i}", finger=i) for i in range(3)]
+        if prim.land_other_elbow:
+            specs += [dict(kind="land", name=f"land finger {i} other elbow", finger=i,
+                           other_elbow=True) for i in range(3)]
     return tuple(Action(index=k, **spec) for k, spec in enumerate(specs))
 
 
@@ -97,7 +102,8 @@ def make_primitive(action: Action, model: HandModel, contacts: Contacts,
     if action.kind == "release":
         return Release(model, contacts, action.finger, prim.release_duration_s, prim)
     if action.kind == "land":
-        return Land(model, contacts, action.finger, prim.land_duration_s, prim)
+        return Land(model, contacts, action.finger, prim.land_duration_s, prim,
+                    other_elbow=action.other_elbow)
     raise ValueError(f"unknown action kind {action.kind!r}")
 
 

@@ -67,7 +67,8 @@ def test_an_evaluation_counts_the_flips_its_episodes_made(compose_cfg):
     names = [a.name for a in actions]
     assert {names[k] for k in flip_actions(actions)} == {"flip left", "flip right"}
     cube = action_table(compose_cfg("object=cube").primitives)
-    assert {cube[k].name for k in flip_actions(cube)} == {f"land finger {i}" for i in range(3)}
+    assert {cube[k].name for k in flip_actions(cube)} == {
+        f"land finger {i}{elbow}" for i in range(3) for elbow in ("", " other elbow")}
     flip = names.index("flip right")
     high = Contacts(Posture((L, R, R)), (-0.21, -0.205, -0.15))
     bend = Contacts(Posture((L, L, R)), (-0.21, -0.09, -0.15))

@@ -260,11 +260,14 @@ def _segments(a: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a + (ends[owner] - a) * t[:, None], owner
 
 
-def arrival_times(waypoints: list[np.ndarray], t0: float, t1: float) -> list[float]:
+def arrival_times(waypoints: list[np.ndarray], t0: float, t1: float,
+                  power: float = 1.0) -> list[float]:
     """When each waypoint is reached, moving from ``t0`` to ``t1`` with time in proportion to
-    each segment's length in joint space."""
-    lengths = [float(np.linalg.norm(b - a)) for a, b in zip(waypoints, waypoints[1:],
-                                                            strict=False)]
+    each segment's length in joint space (to its square root with ``power=0.5``: every
+    segment then asks for the same peak acceleration, where in proportion to the length a
+    short segment beside a long one is crossed in a jerk the joints cannot follow)."""
+    lengths = [float(np.linalg.norm(b - a)) ** power for a, b in zip(waypoints, waypoints[1:],
+                                                                     strict=False)]
     total = sum(lengths) or 1.0
     times = [t0]
     for seg in lengths:

@@ -167,8 +167,8 @@ class Land:
             if way is not None:
                 t0, t1 = self.times["travel"]
                 self.face, self.coord = face, coord
-                self.tracker = JointPath([*way, q_touch],
-                                         [*arrival_times(way, t0, t1), self.times["touch"][1]])
+                self.tracker = JointPath([*way, q_touch], [*arrival_times(way, t0, t1, 0.5),
+                                                           self.times["touch"][1]])
                 self.loaded = None
                 return None
             if tries >= self.max_plans:

@@ -144,6 +144,9 @@ class Land:
         return f"no reachable landing holds the object for finger {i}"
 
     def _start_other_elbow(self, obs, tip_O: np.ndarray, R: np.ndarray) -> str | None:
+        """``start`` with ``other_elbow``: the first place (``_other_elbow_places``) that the
+        finger touches with the other elbow and its links clear, whose grasp holds firmly and
+        whose hover its free joint space reaches from where it is, with that way planned."""
         model, i, pose, r = self.model, self.finger, obs.pose, self.model.tip_radius
         hx, hz = model.shape.half_x, model.shape.half_z
         elbow = -self.elbow

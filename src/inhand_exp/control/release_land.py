@@ -131,7 +131,7 @@ class Land:
         R = rotation(obs.pose[2])
         tip_O = R.T @ (model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2])
         if self.other_elbow:
-            return self._start_other_elbow(obs, tip_O, R)
+            return self._start_other_elbow(obs, R)
         for _, face, coord, path in self._candidates(tip_O):
             if not strict_hold(model, self.contacts.moved(i, coord=coord, face=face,
                                                           active=True), self.gains, firm=True):
@@ -143,7 +143,7 @@ class Land:
                 return None
         return f"no reachable landing holds the object for finger {i}"
 
-    def _start_other_elbow(self, obs, tip_O: np.ndarray, R: np.ndarray) -> str | None:
+    def _start_other_elbow(self, obs, R: np.ndarray) -> str | None:
         """``start`` with ``other_elbow``: the first place (``_other_elbow_places``) that the
         finger touches with the other elbow and its links clear, whose grasp holds firmly and
         whose hover its free joint space reaches from where it is, with that way planned."""
@@ -153,7 +153,7 @@ class Land:
         space = FreeSpace(model, i, pose, self.air)
         q0 = obs.q[2 * i:2 * i + 2].copy()
         tries = 0
-        for face, coord in self._other_elbow_places(obs, tip_O):
+        for face, coord in self._other_elbow_places(obs):
             q_touch = ik_clear(model, i, hover(hx, hz, face, coord, r - self.press), pose, R,
                                model.clearance, prefer=elbow)
             if q_touch is None or (1 if q_touch[1] >= 0 else -1) != elbow:
@@ -178,16 +178,16 @@ class Land:
                 break
         return f"no landing with the other elbow has a clear way for finger {i}"
 
-    def _other_elbow_places(self, obs, tip_O: np.ndarray) -> list[tuple[Face, float]]:
+    def _other_elbow_places(self, obs) -> list[tuple[Face, float]]:
         """Every (face, coordinate), nearest first to the tip's mirror image: where the tip
         would be with the finger's joints mirrored about the vertical through its base, the
         same reach with the elbow on the other side."""
         model, i, pose = self.model, self.finger, obs.pose
         r, hx, hz = model.tip_radius, model.shape.half_x, model.shape.half_z
-        R = rotation(pose[2])
-        mirror = R @ tip_O + pose[:2]
-        mirror[0] = 2 * model.fingers[i].base_x - mirror[0]
-        mirror_O = R.T @ (mirror - pose[:2])
+        f = model.fingers[i]
+        mirror = f.tip(obs.q[2 * i:2 * i + 2]).copy()
+        mirror[0] = 2 * f.base_x - mirror[0]
+        mirror_O = rotation(pose[2]).T @ (mirror - pose[:2])
         places = []
         for face in Face:
             n = int((model.shape.half_extent(face) - 2 * r) // self.step)

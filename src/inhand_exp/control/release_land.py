@@ -129,9 +129,9 @@ class Land:
         self.elbow = 1 if obs.q[2 * i + 1] >= 0 else -1
         self.origin = obs.pose.copy()
         R = rotation(obs.pose[2])
-        tip_O = R.T @ (model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2])
         if self.other_elbow:
             return self._start_other_elbow(obs, R)
+        tip_O = R.T @ (model.fingers[i].tip(obs.q[2 * i:2 * i + 2]) - obs.pose[:2])
         for _, face, coord, path in self._candidates(tip_O):
             if not strict_hold(model, self.contacts.moved(i, coord=coord, face=face,
                                                           active=True), self.gains, firm=True):
@@ -153,7 +153,7 @@ class Land:
         space = FreeSpace(model, i, pose, self.air)
         q0 = obs.q[2 * i:2 * i + 2].copy()
         tries = 0
-        for face, coord in self._other_elbow_places(obs):
+        for face, coord in self._other_elbow_places(obs, R):
             q_touch = ik_clear(model, i, hover(hx, hz, face, coord, r - self.press), pose, R,
                                model.clearance, prefer=elbow)
             if q_touch is None or (1 if q_touch[1] >= 0 else -1) != elbow:
@@ -178,7 +178,7 @@ class Land:
                 break
         return f"no landing with the other elbow has a clear way for finger {i}"
 
-    def _other_elbow_places(self, obs) -> list[tuple[Face, float]]:
+    def _other_elbow_places(self, obs, R: np.ndarray) -> list[tuple[Face, float]]:
         """Every (face, coordinate), nearest first to the tip's mirror image: where the tip
         would be with the finger's joints mirrored about the vertical through its base, the
         same reach with the elbow on the other side."""
@@ -187,7 +187,7 @@ class Land:
         f = model.fingers[i]
         mirror = f.tip(obs.q[2 * i:2 * i + 2]).copy()
         mirror[0] = 2 * f.base_x - mirror[0]
-        mirror_O = rotation(pose[2]).T @ (mirror - pose[:2])
+        mirror_O = R.T @ (mirror - pose[:2])
         places = []
         for face in Face:
             n = int((model.shape.half_extent(face) - 2 * r) // self.step)

@@ -17,6 +17,7 @@ from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.learn.search import Search
 from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.graph import Lattice, PoseGraph
+from inhand_exp.task.rules import to_go
 
 # held high enough for a flip's finger to pass under the pole's lower end (``way_table``)
 TINY = ("learner=search", "task.workspace_x_m=[-0.02,0.02]", "task.workspace_z_m=[0.40,0.44]",
@@ -122,6 +123,48 @@ def test_a_goal_node_the_walk_comes_back_to_no_closer_is_spent(compose_cfg, tiny
     np.testing.assert_array_equal(walk.field, g.distances_to(goal, spent={here}))
     ends = [int(g.ids[t]) for t in policy.successors(cell, chosen)]
     assert any(n >= 0 and n != here and walk.field[n] < walk.field[here] for n in ends)
+
+
+def test_off_the_plan_the_walk_tries_new_grasps_instead_of_going_back(compose_cfg,
+                                                                      tiny_graph_dir):
+    """Where the graph has no path (here a goal off its lattice), the walk searches locally
+    (LRTA*): it first takes the allowed repose that brings the object closest to the goal;
+    where every repose is refused it slides, and it does not slide straight back to the grasp
+    it has just left while a grasp not tried yet is allowed."""
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}"))
+    g, policy = search.ensure_graph(), search.policy
+    lat, dc = g.lattice, search.prim.slide_dc_m
+    cell = next(tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0)
+    pose = np.array([lat.xs[cell[4]], lat.zs[cell[5]], lat.ts[cell[6]]])
+    goal = pose + [0.0, 0.0, 1.0]  # theta off the lattice: no plan
+    assert np.isinf(g.distances_to(goal)).all()
+    posture = g.postures[cell[0]]
+    names = {a.name: a.index for a in policy.actions}
+
+    def observe(coords):
+        obs = np.zeros(18)
+        contacts = Contacts(posture, tuple(float(c) for c in coords))
+        obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
+        return obs
+
+    at = [float(lat.cs[k]) for k in cell[1:4]]
+    mask = np.ones(len(policy.actions), dtype=bool)
+    assert policy.act(0, observe(at), mask) == names["repose +theta"]
+    policy.walks.clear()
+    mask = np.array([a.kind == "slide" for a in policy.actions])
+    first = policy.actions[policy.act(0, observe(at), mask)]
+    assert first.kind == "slide"
+    there = list(at)
+    there[first.finger] += first.dc
+    back = next(a for a in policy.actions if a.kind == "slide" and a.finger == first.finger
+                and a.dc == -first.dc)
+    assert abs(first.dc) == dc
+    chosen = policy.actions[policy.act(0, observe(there), mask)]
+    assert chosen.kind == "slide" and chosen.index != back.index
+    # the grasp left behind now costs more than the slide that leaves it
+    walk = policy.walks[0]
+    start = policy.key(policy.contacts(observe(at)[:6], pose), pose)
+    assert walk.estimate[start] >= to_go(pose, goal, search.rules) + 1.0
 
 
 def test_the_end_contact_cells_take_the_ends_of_the_face():

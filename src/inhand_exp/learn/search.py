@@ -18,10 +18,16 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
   from the episode's
   graph and the distances are planned again (one Dijkstra, about 10 ms), so the walk does not
   come back to try it again from a neighbour;
-- at the goal cell, and wherever the graph has no path, it takes the allowed repose that brings
-  the object closest to the goal (the cell is up to half a cell from the goal itself). When it
-  comes back to a node of the goal cell no closer to the goal than it was there before, that
-  node is spent: the walk plans on to the goal cell's other nodes;
+- at the goal cell, and wherever the graph has no path, it searches locally in real time
+  (LRTA*, Korf 1990): over states keyed by the posture, the fingertips' places to a slide's
+  step and the pose to a repose's step, it takes the allowed action with the least cost (one
+  per action, two per flip) plus the estimate beyond, and raises the estimate of the state it
+  leaves to that least. Estimates start at the distance to the goal in tolerances, so it first
+  takes the repose that brings the object closest to the goal (the cell is up to half a cell
+  from the goal itself); where the reposes towards the goal are refused, it slides the fingers
+  to grasps not tried yet instead of going back and forth. When it comes back to a node of the
+  goal cell no closer to the goal than it was there before, that node is spent: the walk plans
+  on to the goal cell's other nodes;
 - an action that failed to arrive from off the graph is not retried from there; on the graph,
   only cut edges are left out, so that the walk and its distances agree.
 """
@@ -38,13 +44,14 @@ import torch
 from torchrl.envs import EnvBase
 
 from inhand_exp.config import PrimitivesConfig, SearchConfig, TaskConfig, typed
-from inhand_exp.control.grasp import Contacts
+from inhand_exp.control.grasp import Contacts, Posture
 from inhand_exp.control.hand import HandModel
 from inhand_exp.envs.primitive_env import PrimitiveEnv
 from inhand_exp.learn.checkpoint import read_checkpoint, save_checkpoint, stamped, trained_with
 from inhand_exp.learn.registry import Progress
 from inhand_exp.task.actions import Action, action_table
 from inhand_exp.task.graph import (
+    SIDES,
     PoseGraph,
     cached_graph,
     contacts_of,
@@ -132,6 +139,7 @@ class _Walk:
     cut: set = field(default_factory=set)  # edges (node pairs) that failed or were refused
     spent: set = field(default_factory=set)  # goal-cell nodes whose last reposes got stuck
     closest: dict = field(default_factory=dict)  # goal-cell node -> least error seen there
+    estimate: dict = field(default_factory=dict)  # local state -> raised cost to go (LRTA*)
     field: np.ndarray | None = None  # distances to the goal without the cut edges
 
 
@@ -223,7 +231,7 @@ class SearchPolicy:
             # the filter refuses the best edge here (a flip the graph's cells allow, say):
             # plan again without this action's edges out of here
             d = self._cut(walk, here, self.successors(cell, a), a.index, goal)
-        return self.closest_repose(pose, goal, mask)
+        return self.explore(walk, q, pose, goal, mask)
 
     def _cut(self, walk: _Walk, source: int, targets: list[tuple], action: int,
              goal: np.ndarray) -> np.ndarray:
@@ -254,6 +262,56 @@ class SearchPolicy:
             return True
         walk.closest[node] = error
         return False
+
+    # --- off the plan: a local real-time search ---------------------------------------------
+
+    FLIP_COST = 2.0  # a flip takes about twice a repose's time, and it risks more
+
+    def key(self, contacts: Contacts, pose: np.ndarray) -> tuple:
+        """The local state: the posture, each fingertip's place to a slide's step, the pose to a
+        repose's step."""
+        dc = self.prim.slide_dc_m
+        steps = (self.prim.repose_dx_m, self.prim.repose_dz_m, self.prim.repose_dtheta_rad)
+        return (contacts.posture, *(round(c / dc) for c in contacts.coords),
+                *(round(v / s) for v, s in zip(pose, steps, strict=True)))
+
+    def after(self, key: tuple, a: Action) -> tuple | None:
+        """The local state action ``a`` leads to from ``key`` (None for the cube's release and
+        land, which the local search leaves alone)."""
+        k = list(key)
+        if a.kind == "repose":
+            axis = int(np.argmax(np.abs(a.delta)))
+            k[4 + axis] += 1 if a.delta[axis] > 0 else -1
+        elif a.kind == "slide":
+            k[1 + a.finger] += 1 if a.dc > 0 else -1
+        elif a.kind == "flip":
+            faces = list(k[0].faces)
+            faces[a.finger] = SIDES[1 - SIDES.index(faces[a.finger])]
+            k[0] = Posture(tuple(faces))
+        else:
+            return None
+        return tuple(k)
+
+    def explore(self, walk: _Walk, q: np.ndarray, pose: np.ndarray, goal: np.ndarray,
+                mask: np.ndarray) -> int:
+        """One step of LRTA* from the observed state (see the module docstring)."""
+        here = self.key(self.contacts(q, pose), pose)
+        allowed = [a for a in self.actions if mask[a.index]] or list(self.actions)
+        best, choice = math.inf, None
+        for a in allowed:
+            there = self.after(here, a)
+            if there is None:
+                continue
+            beyond = walk.estimate.get(there)
+            if beyond is None:
+                beyond = to_go(pose + np.asarray(a.delta), goal, self.rules)
+            cost = (self.FLIP_COST if a.kind == "flip" else 1.0) + beyond
+            if cost < best:
+                best, choice = cost, a
+        if choice is None:
+            return self.closest_repose(pose, goal, mask)
+        walk.estimate[here] = max(walk.estimate.get(here, to_go(pose, goal, self.rules)), best)
+        return choice.index
 
     def closest_repose(self, pose: np.ndarray, goal: np.ndarray, mask: np.ndarray) -> int:
         """The allowed action whose pose change brings the object closest to the goal (a

@@ -31,6 +31,14 @@ def tiny_graph_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("tiny-graph")
 
 
+def observation(search: Search, contacts: Contacts, pose: np.ndarray,
+                goal: np.ndarray) -> np.ndarray:
+    """The primitive environment's observation of the hand at rest in ``contacts`` at ``pose``,
+    with ``goal``: joints, pose and goal set, velocities zero."""
+    obs = np.zeros(18)
+    obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
+    return obs
+
 def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
     """A hand-built graph over 6 nodes: 0-1 (1 s), 1-2 (1 s), 0-2 (5 s), 2-3 (2 s) both ways;
     one way only 5->0 (1 s) and 3->4 (1 s)."""
@@ -79,8 +87,7 @@ def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tiny_g
     here, best = int(g.ids[cell]), ranked[0]
     pose = np.array([lat.xs[cell[4]], lat.zs[cell[5]], lat.ts[cell[6]]])
     contacts = Contacts(g.postures[cell[0]], tuple(float(lat.cs[k]) for k in cell[1:4]))
-    obs = np.zeros(18)
-    obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
+    obs = observation(search, contacts, pose, goal)
     mask = np.ones(len(policy.actions), dtype=bool)
     assert policy.act(0, obs, mask) == best.index
     # what failed from off the graph is not left out on it: the walk and its distances agree
@@ -112,8 +119,7 @@ def test_a_goal_node_the_walk_comes_back_to_no_closer_is_spent(compose_cfg, tiny
         if np.isfinite(g.distances_to(goal, spent={here})[here]):
             break
     contacts = Contacts(g.postures[cell[0]], tuple(float(lat.cs[k]) for k in cell[1:4]))
-    obs = np.zeros(18)
-    obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
+    obs = observation(search, contacts, pose, goal)
     mask = np.array([a.kind != "repose" for a in policy.actions])  # every repose refused
     policy.act(0, obs, mask)  # at the goal cell: the closest allowed action
     walk = policy.walks[0]
@@ -142,10 +148,8 @@ def test_off_the_plan_the_walk_tries_new_grasps_instead_of_going_back(compose_cf
     names = {a.name: a.index for a in policy.actions}
 
     def observe(coords):
-        obs = np.zeros(18)
-        contacts = Contacts(posture, tuple(float(c) for c in coords))
-        obs[:6], obs[12:15], obs[15:18] = search.model.grasp_q(contacts, pose), pose, goal
-        return obs
+        return observation(search, Contacts(posture, tuple(float(c) for c in coords)), pose,
+                           goal)
 
     at = [float(lat.cs[k]) for k in cell[1:4]]
     mask = np.ones(len(policy.actions), dtype=bool)

@@ -14,7 +14,7 @@ from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.batched import batched_env
 from inhand_exp.envs.primitive_env import PrimitiveEnv
-from inhand_exp.learn.search import Search
+from inhand_exp.learn.search import Search, SearchPolicy
 from inhand_exp.task.goals import GoalPair
 from inhand_exp.task.graph import Lattice, PoseGraph
 from inhand_exp.task.rules import to_go
@@ -64,6 +64,21 @@ def test_dijkstra_finds_the_known_shortest_paths_of_a_small_graph():
     np.testing.assert_allclose(g.distances_to(goal), [4.0, 3.0, 2.0, 0.0, np.inf, 5.0])
     # a spent goal node is no end: with node 3 spent, the goal cell holds no other
     assert np.isinf(g.distances_to(goal, spent={3})).all()
+
+
+def test_a_goal_cell_no_lattice_grasp_holds_ends_the_plan_next_to_it():
+    """Where no node lies in the goal's pose cell (the goal is held, by a grasp between the
+    lattice's points), the plan ends in the pose cells one step from it; a goal cell with
+    nodes keeps its own."""
+    lat = Lattice(np.array([0.0]), np.array([0.3]), 0.1 * np.arange(5), np.array([0.0]))
+    ids = np.array([0, 1, 2, -1, 3], dtype=np.int32).reshape(1, 1, 1, 1, 1, 1, 5)
+    r, c, w = [0, 1, 2], [1, 2, 3], [1.0, 1.0, 4.0]  # a chain, both ways; 2-3 jumps the gap
+    m = sparse.coo_matrix((w + w, (r + c, c + r)), shape=(4, 4)).tocsr()
+    g = PoseGraph(lat, [None], ids, m)
+    np.testing.assert_allclose(g.distances_to(np.array([0.0, 0.3, 0.3])), [2.0, 1.0, 0.0, 0.0])
+    np.testing.assert_allclose(g.distances_to(np.array([0.0, 0.3, 0.3]), spent={2}),
+                               [6.0, 5.0, 4.0, 0.0])
+    np.testing.assert_allclose(g.distances_to(np.array([0.0, 0.3, 0.2])), [2.0, 1.0, 0.0, 4.0])
 
 
 def test_a_refused_best_edge_is_cut_and_the_walk_plans_again(compose_cfg, tiny_graph_dir):
@@ -169,6 +184,42 @@ def test_off_the_plan_the_walk_tries_new_grasps_instead_of_going_back(compose_cf
     walk = policy.walks[0]
     start = policy.key(policy.contacts(observe(at)[:6], pose), pose)
     assert walk.estimate[start] >= to_go(pose, goal, search.rules) + 1.0
+
+
+def test_next_to_a_goal_cell_without_a_node_the_walk_searches_locally_from_then_on(
+        compose_cfg, tiny_graph_dir):
+    """With the goal's pose cell emptied of nodes, the plan ends next to it; at such an end
+    the walk searches locally (LRTA*), and goes on doing so from a node the plan would lead
+    somewhere else, instead of being sent back to the end it has left."""
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}"))
+    g = search.ensure_graph()
+    lat = g.lattice
+    ids = g.ids.copy()
+    ids[..., 0, 0, 0] = -1  # a corner pose cell: no grasp on the lattice holds it
+    bare = PoseGraph(lat, g.postures, ids, g.matrix)
+    policy = SearchPolicy(bare, search.model, search.prim, search.rules, search.policy.actions)
+    goal = np.array([lat.xs[0], lat.zs[0], lat.ts[0]])
+    d = bare.distances_to(goal)
+    ends = set(np.flatnonzero(d == 0.0))
+    beside = ids[..., 1, 0, 0]  # a pose cell next to it: all its nodes are ends
+    assert beside.max() >= 0 and set(beside[beside >= 0].tolist()) <= ends
+    cell = next(c for c, n in np.ndenumerate(ids) if n in ends)
+    far = next(c for c, n in np.ndenumerate(ids) if n >= 0 and 0.0 < d[n] < np.inf)
+
+    def observe(c):
+        pose = np.array([lat.xs[c[4]], lat.zs[c[5]], lat.ts[c[6]]])
+        contacts = Contacts(bare.postures[c[0]], tuple(float(lat.cs[k]) for k in c[1:4]))
+        return observation(search, contacts, pose, goal)
+
+    mask = np.ones(len(policy.actions), dtype=bool)
+    fresh = policy.act(1, observe(far), mask)  # a walk from afar follows the plan
+    assert policy.walks[1].edge is not None and not policy.walks[1].local
+    policy.act(0, observe(cell), mask)
+    walk = policy.walks[0]
+    assert walk.local and walk.edge is None
+    policy.act(0, observe(far), mask)
+    assert walk.local and walk.edge is None  # not sent back along the plan
+    assert mask[fresh]
 
 
 def test_the_end_contact_cells_take_the_ends_of_the_face():

@@ -9,7 +9,8 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
 - the object pose ``X_t`` and the goal ``X_g``; the contacts from the joints (the fingertips'
   place on the object: which side, and where along it);
 - the shortest time to the goal's pose cell from every node (one Dijkstra per goal cell,
-  cached);
+  cached); where no grasp on the lattice holds the object at that cell's centre (the goal
+  itself is held, off the lattice's points), to the pose cells next to it;
 - it carries out the best edge out of its current cell (the least edge time plus shortest
   time beyond; the graph is directed, so only edges that go that way count): the mid-level
   action of that edge (a 2 cm cell is two 1 cm reposes), repeated until the observed cell is
@@ -18,16 +19,17 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
   from the episode's
   graph and the distances are planned again (one Dijkstra, about 10 ms), so the walk does not
   come back to try it again from a neighbour;
-- at the goal cell, and wherever the graph has no path, it searches locally in real time
-  (LRTA*, Korf 1990): over states keyed by the posture, the fingertips' places to a slide's
-  step and the pose to a repose's step, it takes the allowed action with the least cost (one
-  per action, two per flip) plus the estimate beyond, and raises the estimate of the state it
-  leaves to that least. Estimates start at the distance to the goal in tolerances, so it first
-  takes the repose that brings the object closest to the goal (the cell is up to half a cell
-  from the goal itself); where the reposes towards the goal are refused, it slides the fingers
-  to grasps not tried yet instead of going back and forth. When it comes back to a node of the
-  goal cell no closer to the goal than it was there before, that node is spent: the walk plans
-  on to the goal cell's other nodes;
+- at the goal cell (from the cells next to it on, where it holds no node), and wherever the
+  graph has no path, it searches locally in real time (LRTA*, Korf 1990): over states keyed by
+  the posture, the fingertips' places to a slide's step and the pose to a repose's step, it
+  takes the allowed action with the least cost (one per action, two per flip) plus the
+  estimate beyond, and raises the estimate of the state it leaves to that least. Estimates
+  start at the distance to the goal in tolerances, so it first takes the repose that brings
+  the object closest to the goal (the cell is up to half a cell from the goal itself); where
+  the reposes towards the goal are refused, it slides the fingers to grasps not tried yet
+  instead of going back and forth. When it comes back to a node of the goal cell no closer to
+  the goal than it was there before, that node is spent: the walk plans on to the goal cell's
+  other nodes;
 - an action that failed to arrive from off the graph is not retried from there; on the graph,
   only cut edges are left out, so that the walk and its distances agree.
 """
@@ -140,6 +142,7 @@ class _Walk:
     spent: set = field(default_factory=set)  # goal-cell nodes whose last reposes got stuck
     closest: dict = field(default_factory=dict)  # goal-cell node -> least error seen there
     estimate: dict = field(default_factory=dict)  # local state -> raised cost to go (LRTA*)
+    local: bool = False  # reached the cells next to a goal cell without a node: LRTA* only
     field: np.ndarray | None = None  # distances to the goal without the cut edges
 
 
@@ -210,6 +213,9 @@ class SearchPolicy:
         here = int(ids[cell]) if cell is not None else -1
         if here >= 0 and d[here] == 0.0 and self._stuck(walk, here, pose, goal):
             d = self._replan(walk, goal)
+        if self._bare_goal_cell(goal) and (walk.local or (here >= 0 and d[here] == 0.0)):
+            walk.local = True  # next to a goal cell without a node: from here on, locally
+            return self.explore(walk, q, pose, goal, mask)
         while cell is not None and not (here >= 0 and d[here] == 0.0):
             best, choice = math.inf, None
             for a in self.actions:
@@ -232,6 +238,12 @@ class SearchPolicy:
             # plan again without this action's edges out of here
             d = self._cut(walk, here, self.successors(cell, a), a.index, goal)
         return self.explore(walk, q, pose, goal, mask)
+
+    def _bare_goal_cell(self, goal: np.ndarray) -> bool:
+        """Whether the goal's pose cell holds no node (the plan ends in the cells next to it,
+        see ``PoseGraph.distances_to``)."""
+        cell = self.graph.lattice.pose_cell(goal)
+        return cell is not None and not (self.graph.ids[(..., *cell)] >= 0).any()
 
     def _cut(self, walk: _Walk, source: int, targets: list[tuple], action: int,
              goal: np.ndarray) -> np.ndarray:

@@ -300,15 +300,19 @@ class PoseGraph:
 
     def distances_to(self, goal: np.ndarray, cut: set[tuple[int, int]] = frozenset(),
                      spent: set[int] = frozenset()) -> np.ndarray:
-        """Shortest time (s) from every node to any node at the goal's pose cell (inf where
-        none is reachable; all inf when the goal cell holds no node), without the edges
-        ``cut`` (node pairs, from the first to the second) and without the goal cell's nodes
-        ``spent`` as ends."""
+        """Shortest time (s) from every node to any node at the goal's pose cell, or where
+        that cell holds none, at the pose cells one step from it (inf where none is reachable;
+        all inf off the lattice), without the edges ``cut`` (node pairs, from the first to the
+        second) and without the end nodes ``spent``."""
         cell = self.lattice.pose_cell(goal)
         if cell is None:
             return np.full(self.nodes, np.inf)
         targets = self.ids[(..., *cell)]
         targets = targets[targets >= 0]
+        if targets.size == 0:  # the goal is held, but no grasp on the lattice at its cell centre
+            box = tuple(slice(max(0, c - 1), c + 2) for c in cell)
+            targets = self.ids[(..., *box)]
+            targets = targets[targets >= 0]
         if spent:
             targets = targets[~np.isin(targets, list(spent))]
         if targets.size == 0:

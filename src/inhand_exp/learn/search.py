@@ -136,6 +136,7 @@ class _Walk:
     """One environment's episode: its goal, the edge under way and the edges that failed."""
 
     goal: tuple[float, float, float]
+    bare: bool = False  # the goal's pose cell holds no node: the plan ends next to it
     edge: tuple | None = None  # (source node, target cell, action, steps taken, step budget)
     blocked: set = field(default_factory=set)  # (target cell, action) failed from off the graph
     cut: set = field(default_factory=set)  # edges (node pairs) that failed or were refused
@@ -196,7 +197,7 @@ class SearchPolicy:
         q, pose, goal = obs[:6], obs[12:15], obs[15:18]
         walk = self.walks.get(i)
         if walk is None or walk.goal != tuple(np.round(goal, 9)):
-            walk = self.walks[i] = _Walk(tuple(np.round(goal, 9)))
+            walk = self.walks[i] = _Walk(tuple(np.round(goal, 9)), self._bare_goal_cell(goal))
         cell = self.cell(self.contacts(q, pose), pose)
         ids = self.graph.ids
         if walk.edge is not None:
@@ -213,7 +214,7 @@ class SearchPolicy:
         here = int(ids[cell]) if cell is not None else -1
         if here >= 0 and d[here] == 0.0 and self._stuck(walk, here, pose, goal):
             d = self._replan(walk, goal)
-        if self._bare_goal_cell(goal) and (walk.local or (here >= 0 and d[here] == 0.0)):
+        if walk.bare and (walk.local or (here >= 0 and d[here] == 0.0)):
             walk.local = True  # next to a goal cell without a node: from here on, locally
             return self.explore(walk, q, pose, goal, mask)
         while cell is not None and not (here >= 0 and d[here] == 0.0):
@@ -243,7 +244,7 @@ class SearchPolicy:
         """Whether the goal's pose cell holds no node (the plan ends in the cells next to it,
         see ``PoseGraph.distances_to``)."""
         cell = self.graph.lattice.pose_cell(goal)
-        return cell is not None and not (self.graph.ids[(..., *cell)] >= 0).any()
+        return cell is not None and self.graph.nodes_at(cell).size == 0
 
     def _cut(self, walk: _Walk, source: int, targets: list[tuple], action: int,
              goal: np.ndarray) -> np.ndarray:

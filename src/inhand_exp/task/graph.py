@@ -298,6 +298,11 @@ class PoseGraph:
         ids = self.ids[(cell[0], *box)]
         return ids[ids >= 0]
 
+    def nodes_at(self, pose_cell: tuple) -> np.ndarray:
+        """The nodes (any posture and contacts) at a pose cell, or at a box of them (slices)."""
+        ids = self.ids[(..., *pose_cell)]
+        return ids[ids >= 0]
+
     def distances_to(self, goal: np.ndarray, cut: set[tuple[int, int]] = frozenset(),
                      spent: set[int] = frozenset()) -> np.ndarray:
         """Shortest time (s) from every node to any node at the goal's pose cell, or where
@@ -307,12 +312,9 @@ class PoseGraph:
         cell = self.lattice.pose_cell(goal)
         if cell is None:
             return np.full(self.nodes, np.inf)
-        targets = self.ids[(..., *cell)]
-        targets = targets[targets >= 0]
+        targets = self.nodes_at(cell)
         if targets.size == 0:  # the goal is held, but no grasp on the lattice at its cell centre
-            box = tuple(slice(max(0, c - 1), c + 2) for c in cell)
-            targets = self.ids[(..., *box)]
-            targets = targets[targets >= 0]
+            targets = self.nodes_at(tuple(slice(max(0, c - 1), c + 2) for c in cell))
         if spent:
             targets = targets[~np.isin(targets, list(spent))]
         if targets.size == 0:

@@ -183,8 +183,37 @@ def test_off_the_plan_the_walk_tries_new_grasps_instead_of_going_back(compose_cf
     assert chosen.kind == "slide" and chosen.index != back.index
     # the grasp left behind now costs more than the slide that leaves it
     walk = policy.walks[0]
-    start = policy.key(policy.contacts(observe(at)[:6], pose), pose)
+    start = policy.key(walk, policy.contacts(observe(at)[:6], pose), pose)
     assert walk.estimate[start] >= to_go(pose, goal, search.rules) + 1.0
+
+
+def test_the_local_search_knows_a_place_again_across_a_step_edge(compose_cfg, tiny_graph_dir):
+    """LRTA*'s states are the places the walk has been. A pose half a repose step off the
+    1 cm grid (where the graph's walk leaves the object), met again micrometres to the other
+    side of that grid's edge, is the same state and keeps its raised estimate; a repose step
+    away is another state. (Keyed by the grid, the walk went back and forth between two
+    poses for the rest of an episode, each visit a new state.)"""
+    search = Search(compose_cfg(*TINY, f"learner.cache_dir={tiny_graph_dir}"))
+    g, policy = search.ensure_graph(), search.policy
+    lat, dx = g.lattice, search.prim.repose_dx_m
+    cell = next(tuple(ix) for ix, n in np.ndenumerate(g.ids) if n >= 0)
+    contacts = Contacts(g.postures[cell[0]], tuple(float(lat.cs[k]) for k in cell[1:4]))
+    edge = np.array([(round(lat.xs[cell[4]] / dx) + 0.5) * dx, lat.zs[cell[5]], lat.ts[cell[6]]])
+    goal = edge + [0.0, 0.0, 1.0]  # theta off the lattice: no plan, the walk searches locally
+    jitter = np.array([2e-6, 0.0, 0.0])
+    names = {a.name: a.index for a in policy.actions}
+    mask = np.zeros(len(policy.actions), dtype=bool)
+    mask[[names["repose +x"], names["repose -x"]]] = True
+    policy.act(0, observation(search, contacts, edge - jitter, goal), mask)
+    walk = policy.walks[0]
+    first = policy.key(walk, contacts, edge - jitter)
+    raised = walk.estimate[first]
+    assert raised > to_go(edge, goal, search.rules)
+    assert policy.key(walk, contacts, edge + jitter) == first
+    step = policy.key(walk, contacts, edge + [dx, 0.0, 0.0])
+    assert step != first and len(walk.states) == 2
+    policy.act(0, observation(search, contacts, edge + jitter, goal), mask)
+    assert len(walk.states) == 2 and walk.estimate[first] >= raised
 
 
 def test_next_to_a_goal_cell_without_a_node_the_walk_searches_locally_from_then_on(

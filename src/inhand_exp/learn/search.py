@@ -20,10 +20,11 @@ and logged exactly as PPO's. At each step it reads its state from the observatio
   graph and the distances are planned again (one Dijkstra, about 10 ms), so the walk does not
   come back to try it again from a neighbour;
 - at the goal cell (from the cells next to it on, where it holds no node), and wherever the
-  graph has no path, it searches locally in real time (LRTA*, Korf 1990): over states keyed by
-  the posture, the fingertips' places to a slide's step and the pose to a repose's step, it
-  takes the allowed action with the least cost (one per action, two per flip) plus the
-  estimate beyond, and raises the estimate of the state it leaves to that least. Estimates
+  graph has no path, it searches locally in real time (LRTA*, Korf 1990): over the places it
+  has been (the posture, the fingertips' places and the pose; within half a slide's or a
+  repose's step of a place met before is that place), it takes the allowed action with the
+  least cost (one per action, two per flip) plus the estimate beyond, and raises the estimate
+  of the state it leaves to that least. Estimates
   start at the distance to the goal in tolerances, so it first takes the repose that brings
   the object closest to the goal (the cell is up to half a cell from the goal itself); where
   the reposes towards the goal are refused, it slides the fingers to grasps not tried yet
@@ -143,6 +144,7 @@ class _Walk:
     spent: set = field(default_factory=set)  # goal-cell nodes whose last reposes got stuck
     closest: dict = field(default_factory=dict)  # goal-cell node -> least error seen there
     estimate: dict = field(default_factory=dict)  # local state -> raised cost to go (LRTA*)
+    states: list = field(default_factory=list)  # the local states met: (posture, scaled place)
     local: bool = False  # reached the cells next to a goal cell without a node: LRTA* only
     field: np.ndarray | None = None  # distances to the goal without the cut edges
 
@@ -280,39 +282,67 @@ class SearchPolicy:
 
     FLIP_COST = 2.0  # a flip takes about twice a repose's time, and it risks more
 
-    def key(self, contacts: Contacts, pose: np.ndarray) -> tuple:
-        """The local state: the posture, each fingertip's place to a slide's step, the pose to a
-        repose's step."""
-        dc = self.prim.slide_dc_m
+    def scaled(self, contacts: Contacts, pose: np.ndarray) -> np.ndarray:
+        """The fingertips' places in slide steps and the pose in repose steps."""
         steps = (self.prim.repose_dx_m, self.prim.repose_dz_m, self.prim.repose_dtheta_rad)
-        return (contacts.posture, *(round(c / dc) for c in contacts.coords),
-                *(round(v / s) for v, s in zip(pose, steps, strict=True)))
+        return np.concatenate([np.asarray(contacts.coords) / self.prim.slide_dc_m,
+                               np.asarray(pose) / np.asarray(steps)])
 
-    def after(self, key: tuple, a: Action) -> tuple | None:
-        """The local state action ``a`` leads to from ``key`` (None for the cube's release and
-        land, which the local search leaves alone)."""
-        k = list(key)
+    @staticmethod
+    def met(walk: _Walk, posture: Posture, place: np.ndarray) -> int | None:
+        """The local state met before within half a step of ``place`` in every coordinate
+        (the nearest), or None."""
+        best, found = 0.5, None
+        for n, (p, v) in enumerate(walk.states):
+            if p == posture:
+                gap = float(np.max(np.abs(v - place)))
+                if gap < best:
+                    best, found = gap, n
+        return found
+
+    def key(self, walk: _Walk, contacts: Contacts, pose: np.ndarray) -> int:
+        """The local state of the observed grasp and pose: the one met before within half a
+        step (a slide's, a repose's) of it, else a new one. States are the places the walk
+        has been, not cells of a fixed grid: the reposes move the object by whole steps from
+        wherever it was, so a grid's edges would fall where it stops (a graph cell's centre
+        lies half a repose step off the grid of 1 cm steps) and the same place would get a
+        new key at every visit, which keeps LRTA* from learning (pairs that went back and
+        forth between two poses for 100 actions)."""
+        place = self.scaled(contacts, pose)
+        n = self.met(walk, contacts.posture, place)
+        if n is None:
+            walk.states.append((contacts.posture, place))
+            n = len(walk.states) - 1
+        return n
+
+    def after(self, walk: _Walk, here: int, a: Action) -> int | tuple | None:
+        """The local state action ``a`` leads to from state ``here``: one met before, or the
+        predicted place when none was (a key no estimate is stored under yet); None for the
+        cube's release and land, which the local search leaves alone."""
+        posture, place = walk.states[here]
+        place = place.copy()
         if a.kind == "repose":
             axis = int(np.argmax(np.abs(a.delta)))
-            k[4 + axis] += 1 if a.delta[axis] > 0 else -1
+            place[3 + axis] += 1.0 if a.delta[axis] > 0 else -1.0
         elif a.kind == "slide":
-            k[1 + a.finger] += 1 if a.dc > 0 else -1
+            place[a.finger] += 1.0 if a.dc > 0 else -1.0
         elif a.kind == "flip":
-            faces = list(k[0].faces)
+            faces = list(posture.faces)
             faces[a.finger] = SIDES[1 - SIDES.index(faces[a.finger])]
-            k[0] = Posture(tuple(faces))
+            posture = Posture(tuple(faces))
         else:
             return None
-        return tuple(k)
+        n = self.met(walk, posture, place)
+        return n if n is not None else (posture, tuple(place))
 
     def explore(self, walk: _Walk, q: np.ndarray, pose: np.ndarray, goal: np.ndarray,
                 mask: np.ndarray) -> int:
         """One step of LRTA* from the observed state (see the module docstring)."""
-        here = self.key(self.contacts(q, pose), pose)
+        here = self.key(walk, self.contacts(q, pose), pose)
         allowed = [a for a in self.actions if mask[a.index]] or list(self.actions)
         best, choice = math.inf, None
         for a in allowed:
-            there = self.after(here, a)
+            there = self.after(walk, here, a)
             if there is None:
                 continue
             beyond = walk.estimate.get(there)

@@ -152,6 +152,13 @@ class PrimitivesConfig:
     min_normal_force_n: float = spec(0.5, "Least normal force at every held contact (N).", ge=0)
     max_normal_force_n: float = spec(50.0, "Most normal force a plan may ask of a contact (N).",
                                      gt=0)
+    slide_max_normal_force_n: float = spec(35.0, "Most normal force a slide's plan may ask of "
+                                           "a holding finger at one control step (N); a step "
+                                           "that needs more holds the object with every "
+                                           "finger instead (the slide goes on at the next). "
+                                           "Such a plan balances the drag by pinching a grasp "
+                                           "whose torque rests on friction across the faces, "
+                                           "and shoots the object out of the hand.", gt=0)
     friction_margin: float = spec(0.8, "Fraction of the friction cone the controller may use.",
                                   gt=0)
     min_grasp_margin: float = spec(0.02, "Least slack of a grasp's deepest squeeze (per newton "

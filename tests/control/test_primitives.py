@@ -810,3 +810,21 @@ def test_flip_landing_is_the_same_without_the_span_pruning(nominal_model, make_w
     full = Flip(nominal_model, contacts, finger, FLIP_S)
     assert full.start(obs) == why
     assert why is None and pruned.coord == full.coord
+
+
+
+def test_a_slide_whose_plan_pinches_halts_and_holds(nominal_model, make_world):
+    """A slide whose force plan asks a holding finger for more than
+    ``slide_max_normal_force_n`` stops where it is and every finger holds the object to the
+    end of its duration: a timeout short of its target, nothing dropped. (In Table III's
+    thinner-pole episodes such plans asked 40-50 N and shot the pole out of the hand; here a
+    cap below what any plan asks makes the first step halt.)"""
+    world = make_world(BEND, X0)
+    c0, p0 = contact_coords(world), world.object_pose()
+    gains = PrimitivesConfig(slide_max_normal_force_n=0.5)  # the least normal force: any pinch
+    out = execute(world, Slide(nominal_model, BEND, 1, -SLIDE_DC, SLIDE_S, gains),
+                  settle_early=True)
+    assert out.reason == "timeout" and out.steps == round(SLIDE_S / world.dt), out
+    assert np.all(np.abs(contact_coords(world) - c0) < 2e-3), contact_coords(world) - c0
+    assert pose_error(world.object_pose(), p0)[0] < 3e-3
+    assert touching(world) == {0, 1, 2}

@@ -123,6 +123,7 @@ class Slide:
                            firm=True):
             return f"the grasp after the slide of finger {i} cannot hold the object firmly"
         self.origin = obs.pose.copy()
+        self.halted = False  # set once a step's plan pinches (``_pinches``)
         return None
 
     def achieved(self, obs, tol_m: float = 0.003) -> str | None:
@@ -171,16 +172,29 @@ class Slide:
         zero = np.zeros(3)
         acc, w_O = object_wrench(self.model, self.gains, obs.pose, obs.twist,
                                  (self.origin, zero, zero))
-        lam = plan.squeeze.solve(w_O)
+        lam = None if self.halted else plan.squeeze.solve(w_O)
         own = (self.finger, functools.partial(self._tip_acc, obs, acc))
+        if lam is not None and self._pinches(plan, lam):
+            self.halted, lam = True, None  # the slide stops here and holds to its end
         if lam is None:
             # the drag cannot be balanced this step: every finger holds, the sliding one with
-            # static friction too, and the slide goes on at the next step
+            # static friction too, and the slide goes on at the next step (unless halted)
             plan, own = self._planned("hold", obs), None
             lam = plan.squeeze.solve(w_O)
         if lam is None:
             return None
         return grasp_torques(self.model, plan, lam, acc, obs.pose, obs.twist, obs.q, obs.qd, own)
+
+    def _pinches(self, plan: GraspPlan, lam: np.ndarray) -> bool:
+        """True when ``lam`` asks a holding finger for more normal force than
+        ``gains.slide_max_normal_force_n``. Where the slide's drag can be balanced only by
+        pinching (the holding tips nearly opposite each other, the torque resting on friction
+        across the faces: on a pole thinner than modelled, once the sliding tip has moved), the
+        least-force plan jumps from a few newtons to 40-50 and the object leaves the hand."""
+        cap, k = self.gains.slide_max_normal_force_n, plan.fingers.index(self.finger)
+        # (the slide then halts: its tip stays where it is and every finger holds the object
+        # for the rest of its duration, which ends it as a timeout short of its target)
+        return any(lam[2 * j] > cap for j in range(len(plan.fingers)) if j != k)
 
     def _tip_acc(self, obs, acc: np.ndarray, t: FingerTerms, c: float, s: float
                  ) -> tuple[float, float]:

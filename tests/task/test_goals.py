@@ -195,6 +195,29 @@ def test_a_perturbed_set_starts_on_the_simulated_object_and_keeps_the_pairs_that
         assert np.array_equal(a.xg, b.xg) == (i not in misfits)
 
 
+def test_a_shorter_pole_draws_again_the_pairs_whose_tip_would_rest_on_its_end(model):
+    """The nominal sampler keeps a tip two radii from the nominal ends: where a pole a tenth
+    shorter ends. Such a tip reaches the shorter pole (the joints and links allow it) but rests
+    on its edge; those pairs are drawn again, and no tip of the set lies on an edge."""
+    from inhand_exp.config import PerturbConfig
+    from inhand_exp.task.goals import EDGE_M, PRESS_M
+    from inhand_exp.task.scene import true_object
+
+    shorter = HandModel.from_config(HandConfig(), true_object(
+        ObjectConfig(), PerturbConfig("shorter", length_scale=0.9)), 9.81)
+    fits = settable(shorter)
+    end = shorter.shape.half_z - EDGE_M
+    nominal = goal_set(model, "medium", 24, seed=1234)
+    edge = [p for p in nominal if max(map(abs, p.contacts.coords)) > end]
+    assert edge and not any(fits(p) for p in edge)
+    for p in edge:  # reach and links alone would have let it start there
+        assert shorter.grasp_q(p.contacts, p.x0, PRESS_M).shape == (6,)
+    perturbed = goal_set(model, "medium", 24, seed=1234, fits=fits)
+    assert all(abs(c) <= end for p in perturbed for c in p.contacts.coords)
+    redrawn = [not np.array_equal(a.xg, b.xg) for a, b in zip(nominal, perturbed, strict=True)]
+    assert sum(redrawn) == len(edge)
+
+
 @pytest.mark.parametrize("share", [0.25, 0.4, 1.0])
 def test_flip_slots_hold_the_share(share):
     for k in (1, 4, 10, 500):

@@ -196,14 +196,22 @@ def _inside(ws: Workspace, pose: np.ndarray) -> bool:
 
 Start = tuple[np.ndarray, Contacts]
 PRESS_M = 0.0005  # initial fingertip press into the surface (m)
+EDGE_M = 0.001  # a contact closer than this to its face's end touches the edge, not the face
 
 
 def settable(true_model: HandModel):
     """A test of pairs: the fingers can be put on the *simulated* object at X0 with the pair's
     grasp (``true_model``: the hand and the perturbed object; pairs are drawn on the nominal
-    one, and a thicker, thinner or longer pole may not fit the same contacts)."""
+    one, and a thicker, thinner or longer pole may not fit the same contacts). Every contact
+    must lie on its face of the simulated object, ``EDGE_M`` or more inside its end: the
+    nominal sampler keeps tips two radii from the nominal ends, which is where a pole a
+    tenth shorter ends, and a tip put there rests on the edge and slips off it."""
 
     def fits(pair: GoalPair) -> bool:
+        c = pair.contacts
+        if any(on and abs(coord) > true_model.shape.half_extent(face) - EDGE_M
+               for coord, face, on in zip(c.coords, c.posture.faces, c.active, strict=True)):
+            return False
         try:
             true_model.grasp_q(pair.contacts, pair.x0, PRESS_M)
         except GeometryError:

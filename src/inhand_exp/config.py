@@ -154,8 +154,8 @@ class PrimitivesConfig:
                                      gt=0)
     slide_max_normal_force_n: float = spec(35.0, "Most normal force a slide's plan may ask of "
                                            "a holding finger at one control step (N); a step "
-                                           "that needs more holds the object with every "
-                                           "finger instead (the slide goes on at the next). "
+                                           "that needs more halts the slide: every finger "
+                                           "holds the object to the end of its time. "
                                            "Such a plan balances the drag by pinching a grasp "
                                            "whose torque rests on friction across the faces, "
                                            "and shoots the object out of the hand.", gt=0)

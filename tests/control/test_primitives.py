@@ -812,7 +812,6 @@ def test_flip_landing_is_the_same_without_the_span_pruning(nominal_model, make_w
     assert why is None and pruned.coord == full.coord
 
 
-
 def test_a_slide_whose_plan_pinches_halts_and_holds(nominal_model, make_world):
     """A slide whose force plan asks a holding finger for more than
     ``slide_max_normal_force_n`` stops where it is and every finger holds the object to the

@@ -169,8 +169,9 @@ def test_robustness_rows_give_the_change_from_the_trained_object():
     # heavier pole none alone: sqrt(2 - 2^2 / 10) / 10
     assert out.loc[("none", "heavier"), "vs_trained_se"] == pytest.approx(np.sqrt(1.6) / 10)
     assert out.loc[("none", "none"), "vs_trained_se"] == 0.0
+    assert out.loc[("none", "heavier"), "vs_trained_pairs"] == 10
     text = tables.render(out.reset_index(), "robustness")
-    assert "vs trained object" in text and "| -20.0 ± 12.6 pts |" in text
+    assert "vs trained object" in text and "| -20.0 ± 12.6 pts | 10 |" in text
     alone = tables.build(pd.DataFrame(rows[10:20]), "robustness")  # no trained-object row
     assert alone["vs_trained"].isna().all() and "| - |" in tables.render(alone, "robustness")
 
@@ -188,17 +189,22 @@ def test_a_cell_missing_a_seed_is_compared_with_the_same_seeds_of_the_trained_ob
     assert out.loc["none", "vs_trained"] == 0.0
 
 
-def test_the_paired_error_leaves_out_pairs_drawn_again_for_the_perturbation():
+def test_the_change_leaves_out_pairs_drawn_again_for_the_perturbation():
     """A pair the perturbed pole was given again (another X0) is not compared with the
-    trained object's; the rest are, episode by episode."""
+    trained object's; the rest are, episode by episode. Here the thinner pole solves its
+    drawn-again pair and the trained object failed its own: counted, they would make the
+    change -0.4 instead of -5/9."""
     rows = [episode(k, "medium", k < 8, seed=0) | {"variant": "default"} for k in range(10)]
     thin = [episode(k, "medium", k in (0, 1, 8, 9), seed=0)
             | {"perturb": "thinner", "variant": "default"} for k in range(10)]
     thin[9]["x0"] = [0.01, 0.3, 0.0]  # drawn again: it does not count
-    se = tables.paired_se(pd.DataFrame(rows + thin))
+    stats = tables.paired(pd.DataFrame(rows + thin)).loc[("ppo", "default", "none", "thinner")]
     # nine pairs: the trained object alone solved k = 2..7 (6), the thinner pole alone k = 8
-    assert se[("ppo", "default", "none", "thinner")] == pytest.approx(
-        np.sqrt(7 - 5 ** 2 / 9) / 9)
+    assert stats["pairs"] == 9 and stats["change"] == pytest.approx((1 - 6) / 9)
+    assert stats["se"] == pytest.approx(np.sqrt(7 - 5 ** 2 / 9) / 9)
+    out = tables.build(pd.DataFrame(rows + thin), "robustness").set_index("perturb")
+    assert out.loc["thinner", "vs_trained"] == pytest.approx(-5 / 9)
+    assert out.loc["thinner", "success_rate_mean"] == pytest.approx(0.4)  # all ten, still
 
 
 def test_cli_refuses_paths_without_logs(tmp_path, capsys):

@@ -114,50 +114,53 @@ SAME = ["learner", "variant", "noise"]  # what a Table III row is compared withi
 
 
 def _vs_trained(rows: pd.DataFrame, episodes: pd.DataFrame) -> pd.DataFrame:
-    """Each row's success minus that of the trained object (``perturb=none``) of the same
-    learner, variant and noise: ours seed by seed, over the seeds both evaluated, then averaged
-    (so a cell that a sweep has not run for every seed yet is compared with the same seeds of
-    the trained object), and the paper's; NaN where the trained object was not evaluated. With
-    the standard error of ours over the pairs both evaluated (``paired_se``)."""
+    """Each row's change from the trained object (``perturb=none``) of the same learner,
+    variant and noise, on the test pairs both evaluated (``paired``): the mean of the perturbed
+    success minus the trained object's over those pairs, pooled over the seeds both ran (so a
+    cell that a sweep has not run for every seed yet is compared with the same seeds of the
+    trained object), its standard error, and the number of pairs; and the paper's change. A
+    pair the perturbed object was given again (another X0 or Xg: the thicker, thinner, longer
+    and shorter poles draw again the pairs they cannot hold) is left out, so the change is not
+    that of an easier or harder set. NaN where the trained object was not evaluated."""
     keys = [*SAME, "perturb"]
-    per = episodes.groupby([*keys, "seed"], dropna=False)["success"].mean().rename("rate")
-    per = per.reset_index()
-    base = per[per["perturb"] == "none"].drop(columns="perturb")
-    both = per.merge(base, on=[*SAME, "seed"], suffixes=("", "_trained"))
-    ours = (both["rate"] - both["rate_trained"]).groupby(
-        [both[k] for k in keys], dropna=False).mean()
+    stats = paired(episodes)
     rows = rows.copy()
     idx = pd.MultiIndex.from_frame(rows[keys])
-    rows["vs_trained"] = ours.reindex(idx).to_numpy(dtype=float)
+    for col in ("change", "se", "pairs"):
+        name = "vs_trained" if col == "change" else f"vs_trained_{col}"
+        rows[name] = stats[col].reindex(idx).to_numpy(float) if len(stats) else np.nan
     ref = rows[rows["perturb"] == "none"].set_index(SAME)["paper_success"]
     rows["paper_vs_trained"] = rows["paper_success"].to_numpy(dtype=float) - ref.reindex(
         pd.MultiIndex.from_frame(rows[SAME])).to_numpy(dtype=float)
-    se = paired_se(episodes)
-    rows["vs_trained_se"] = se.reindex(idx).to_numpy(float)
     return rows
 
 
-def paired_se(episodes: pd.DataFrame) -> pd.Series:
-    """Standard error of each perturbed setting's success minus the trained object's, from
-    the test pairs both evaluated (the same seed, episode, X0 and Xg; a pair the perturbed
-    object was given again is left out): ``sqrt(b + c - (c - b)^2 / n) / n`` with ``b`` the
-    pairs only the trained object solved and ``c`` those only the perturbed one did. A
-    difference smaller than about twice this is within what the same policy gives run to run.
-    Indexed by learner, variant, noise and perturb."""
+def paired(episodes: pd.DataFrame) -> pd.DataFrame:
+    """Each perturbed setting against the trained object on the test pairs both evaluated (the
+    same seed, episode, X0 and Xg; a pair the perturbed object was given again is left out):
+    ``change``, the mean success difference; ``se``, its standard error,
+    ``sqrt(b + c - (c - b)^2 / n) / n`` with ``b`` the pairs only the trained object solved and
+    ``c`` those only the perturbed one did (a change smaller than about twice this is within
+    what the same policy gives run to run); ``pairs``, ``n``. Indexed by learner, variant, noise
+    and perturb."""
+    names = [*SAME, "perturb"]
+    empty = pd.DataFrame(columns=["change", "se", "pairs"], dtype=float)
     if episodes.empty:
-        return pd.Series(dtype=float)
+        return empty
     eps = episodes.assign(pair=episodes["x0"].astype(str) + episodes["xg"].astype(str))
     match = [*SAME, "seed", "episode", "pair"]
     base = eps[eps["perturb"] == "none"][[*match, "success"]]
     both = eps.merge(base, on=match, suffixes=("", "_trained"))
     out = {}
-    for key, g in both.groupby([*SAME, "perturb"], dropna=False):
+    for key, g in both.groupby(names, dropna=False):
         n = len(g)
         b = int((g["success_trained"] & ~g["success"]).sum())
         c = int((g["success"] & ~g["success_trained"]).sum())
-        out[key] = np.sqrt(max(b + c - (c - b) ** 2 / n, 0.0)) / n
-    names = [*SAME, "perturb"]
-    return pd.Series(out, dtype=float).rename_axis(names) if out else pd.Series(dtype=float)
+        out[key] = {"change": (c - b) / n, "pairs": n,
+                    "se": np.sqrt(max(b + c - (c - b) ** 2 / n, 0.0)) / n}
+    if not out:
+        return empty
+    return pd.DataFrame.from_dict(out, orient="index").rename_axis(names)
 
 
 def paper_rank(column: pd.Series) -> pd.Series:
@@ -193,6 +196,10 @@ def _points(v: float, se: float = np.nan) -> str:
     return f"{v * 100:+.1f} pts" if pd.isna(se) else f"{v * 100:+.1f} ± {se * 100:.1f} pts"
 
 
+def _count(v: float) -> str:
+    return "-" if pd.isna(v) else str(int(v))
+
+
 def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
     """``rows`` (from ``build``) as a markdown table, or CSV."""
     if rows.empty:
@@ -206,7 +213,7 @@ def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
     vs = "vs_trained" in rows.columns  # Table III: the change from the trained object
     flips = rows.get("flipped_rate_mean", pd.Series(dtype=float)).notna().any()
     head = [*keys, "seeds", "episodes", "success", "paper",
-            *(("vs trained object", "paper") if vs else ()), "drops", "paper", "timeouts",
+            *(("vs trained object", "pairs", "paper") if vs else ()), "drops", "paper", "timeouts",
             "avg time (s)", "paper", *(("flipped",) if flips else ())]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in rows.iterrows():
@@ -215,6 +222,7 @@ def render(rows: pd.DataFrame, table: str, fmt: str = "markdown") -> str:
             _cell(r["success_rate_mean"], r["success_rate_std"], True),
             _ref(r.get("paper_success"), True),
             *((_points(r["vs_trained"], r.get("vs_trained_se", np.nan)),
+               _count(r.get("vs_trained_pairs", np.nan)),
                _points(r["paper_vs_trained"])) if vs else ()),
             _cell(r["drop_rate_mean"], r["drop_rate_std"], True), _ref(r.get("paper_drop"), True),
             _cell(r["timeout_rate_mean"], r["timeout_rate_std"], True),

@@ -291,6 +291,14 @@ class TaskConfig:
                                    "real object does not fit, such as a longer pole's end "
                                    "resting on the palm), unless no other action is allowed; "
                                    "false: the paper's filter.")
+    touch_finds_length: bool = spec(False, "A link or the palm that touches the object "
+                                    "farther from its centre than the controllers' model's "
+                                    "ends (by over 5 mm) lengthens the model to there, at both "
+                                    "ends, for the rest of the episode: the filter and the "
+                                    "primitives then plan on the object as long as touch found "
+                                    "it (a longer pole's end no longer meets the links and the "
+                                    "palm again and again); false: the model keeps the nominal "
+                                    "length.")
     reward_goal: float = spec(5.0, "Reward on reaching the goal.")
     reward_invalid: float = spec(-0.01, "Reward of an infeasible action (penalty mode).")
     reward_flip: float = spec(1.0, "Reward of a useful, successful flip.")

@@ -282,3 +282,26 @@ def test_no_repeat_contact_refuses_the_move_that_just_rested_the_pole_on_the_pal
     assert masks[0][down] and not masks[1][down]
     masks[1][down] = True
     assert torch.equal(masks[0], masks[1])  # nothing else refused
+
+
+def test_touch_finds_length_plans_on_the_pole_as_long_as_the_palm_found_it(compose_cfg):
+    """The pole 10 % longer than the model: `repose -z` rests its real end on the palm. With
+    the option the model takes the length the palm's touch shows (0.55 m, not 0.50), the move
+    down is refused from then on, and a new episode starts from the nominal model again."""
+    x0 = np.array([-0.0443, 0.2816, 0.0552])  # the start of a medium test pair
+    pair = GoalPair("medium", x0.copy(), np.array([-0.04, 0.226, -0.54]),
+                    Contacts(Posture((L, R, R)), (-0.095, -0.04, -0.12)))
+    lengths, refused = [], []
+    for overrides in ([], ["task.touch_finds_length=true"]):
+        env = PrimitiveEnv(compose_cfg("perturb=longer", *overrides), goals=[pair, pair],
+                           seed=0)
+        td = env.reset()
+        down = next(a.index for a in env.actions if a.name == "repose -z")
+        td = env.step(td.set("action", torch.tensor(down)))["next"]
+        assert OUTCOMES[int(td["outcome"])] == "link_contact"
+        lengths.append(env.model.shape.length_m)
+        refused.append(not td["action_mask"][down])
+        env.reset()
+        assert env.model.shape.length_m == 0.5
+    assert lengths[0] == 0.5 and not refused[0]
+    assert lengths[1] == pytest.approx(0.55, abs=0.003) and refused[1]

@@ -246,6 +246,24 @@ def test_object_overlapping_the_palm_touches_it(world, model):
         model.grasp_q(BEND, pose)
 
 
+@pytest.mark.parametrize("theta", [0.4, -0.4])
+def test_palm_contact_points_lie_on_the_tilted_poles_lower_end(world, model, theta):
+    """The tilted pole's lowest corner 3 mm into the palm: every contact point the palm
+    reports lies at the pole's end, half its length from the centre along its axis, in the
+    model's frame (the sign convention of theta is the model's)."""
+    from inhand_exp.control.execute import along_axis
+    half_x, half_z = model.shape.half_x, model.shape.half_z
+    z = half_z * np.cos(theta) + half_x * np.sin(abs(theta)) - 0.003
+    pose = np.array([BETWEEN_X, z, theta])
+    assert model.palm_gap(pose) == pytest.approx(-0.003)
+    world.reset(pose, Q_AWAY)
+    points = world.hand_contact_points()
+    assert points and {name for name, _ in points} == {"palm"}
+    for _, at in points:
+        assert at[1] == pytest.approx(-0.003, abs=1e-3)  # the corner, 3 mm into the palm
+        assert along_axis(at, pose) == pytest.approx(half_z, abs=2e-3)
+
+
 def test_unheld_pole_dropped_comes_to_rest_on_the_palm(world, model):
     """Dropped upright from 5 cm above the palm, fingers out of the way, the pole lands on its
     lower end and stands on the palm: it neither sinks through nor bounces off."""

@@ -56,7 +56,7 @@ class WorldLike(Protocol):
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]: ...
     def step(self, tau: np.ndarray) -> None: ...
     def grasp_lost(self) -> str | None: ...
-    def hand_contacts(self) -> list[str]: ...
+    def hand_contact_points(self) -> list[tuple[str, np.ndarray]]: ...
 
 
 StateCheck = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], "str | None"]
@@ -79,7 +79,9 @@ class Outcome:
     - unstable: the simulation blew up (NaN, runaway speeds): a drop;
     - timeout: the time ran out before the goal was reached;
     - link_contact: a link or the palm touched the object on the way (``detail`` names them);
-      ``reached`` says whether the goal was reached all the same.
+      ``reached`` says whether the goal was reached all the same, and ``reach_m`` how far
+      from the object's centre along its long axis they touched it, at most (m, in the frame
+      of the observed pose): a point past the model's end shows the object longer.
     """
 
     ok: bool
@@ -88,6 +90,7 @@ class Outcome:
     sim_time_s: float
     steps: int
     reached: bool = False
+    reach_m: float = 0.0
 
     @property
     def dropped(self) -> bool:
@@ -101,6 +104,14 @@ def _off_course(pose: np.ndarray, start: np.ndarray, delta: np.ndarray) -> float
     n = dx * dx + dz * dz
     s = 0.0 if n == 0.0 else min(1.0, max(0.0, (ex * dx + ez * dz) / n))
     return math.hypot(ex - s * dx, ez - s * dz)
+
+
+def along_axis(point: np.ndarray, pose: np.ndarray) -> float:
+    """How far world ``point`` (x, z) lies from the centre of an object at ``pose`` along its
+    long axis (the object frame's z), either way (m)."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    dx, dz = float(point[0]) - float(pose[0]), float(point[1]) - float(pose[1])
+    return abs(-s * dx + c * dz)
 
 
 def joint_hold(q_ref: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: float = 40.0,
@@ -132,6 +143,7 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
     settled = getattr(primitive, "settled", None) if settle_early else None
     lost_since: float | None = None
     touched: set[str] = set()
+    reach = 0.0  # the farthest along the long axis a link or the palm touched the object
 
     def read() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         pose, twist = world.object_state()
@@ -174,7 +186,9 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
             return Outcome(False, "unstable", str(err), k * world.dt, k)
         if (k + 1) % check_every:
             continue
-        touched.update(world.hand_contacts())
+        for name, at in world.hand_contact_points():
+            touched.add(name)
+            reach = max(reach, along_axis(at, pose + offset))
         lost = world.grasp_lost()
         if lost is None:
             lost_since = None
@@ -192,7 +206,7 @@ def execute(world: WorldLike, primitive: Primitive, pose_offset: np.ndarray | No
     missing = primitive.achieved(Observation(q, qd, pose + offset, twist, n * world.dt))
     if touched:
         return Outcome(False, "link_contact", ", ".join(sorted(touched)) + " touched the object",
-                       n * world.dt, n, reached=missing is None)
+                       n * world.dt, n, reached=missing is None, reach_m=reach)
     if missing is not None:
         return Outcome(False, "timeout", missing, n * world.dt, n)
     return Outcome(True, "done", "", n * world.dt, n, reached=True)

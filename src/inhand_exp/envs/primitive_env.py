@@ -10,6 +10,8 @@ whether the posture can hold the goal (``task.posture_advice.PostureAdvice``, 2 
 ``action_mask`` says which actions the feasibility filter allows (with ``task.no_undo``, not the
 one that undoes the last; with ``task.no_undo_flip``, not the last flip again; with
 ``task.no_repeat_contact``, not the last action again when it ended touching a link or the palm).
+With ``task.touch_finds_length``, a link or the palm touching the object past the model's end
+lengthens the model (filter and primitives) to where it touched, until the episode ends.
 ``success``, ``dropped`` and ``sim_time_s`` are reported beside the observation for evaluation,
 with the true object ``pose``, whether the last action was ``valid``, its ``outcome`` (an index
 into ``OUTCOMES``), the ``physics_steps`` the world has taken since it was made, the wall
@@ -47,6 +49,7 @@ from inhand_exp.task.scene import build_scene
 
 # how the last action ended: an execute() reason, "rejected" by the filter, or "none" (reset)
 OUTCOMES = ("none", *REASONS, "rejected")
+FIND_LENGTH_MIN_M = 0.005  # task.touch_finds_length: a touch this far past the end counts
 
 
 class PrimitiveEnv(EnvBase):
@@ -80,6 +83,7 @@ class PrimitiveEnv(EnvBase):
         # with task.no_repeat_contact: the last action, when it ended touching a link or the palm
         self.no_repeat = bool(rules.no_repeat_contact)
         self.repeat: int | None = None
+        self.find_length = bool(rules.touch_finds_length)
         self.idle, self.last = False, None
         self.snapshots = None
         if states_hz > 0:
@@ -159,6 +163,14 @@ class PrimitiveEnv(EnvBase):
         self.last = td
         return td
 
+    def _lengthen_to(self, reach_m: float) -> None:
+        """task.touch_finds_length: the model as long as a touch ``reach_m`` from the centre
+        shows the object is, when that is past its ends by more than ``FIND_LENGTH_MIN_M``
+        (observation noise moves the touch that much)."""
+        extra = reach_m - self.model.shape.half_z
+        if extra > FIND_LENGTH_MIN_M:
+            self.model = self.model.lengthened(extra)
+
     # --- episodes -----------------------------------------------------------------------
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDict:
@@ -167,6 +179,7 @@ class PrimitiveEnv(EnvBase):
             return idle_output(self.last, done=False)
         pair = self.task.pair
         self.contacts = pair.contacts
+        self.model = self.scene.model  # task.touch_finds_length: nominal again
         self.postures = {pair.contacts.posture}  # reached so far in this episode
         self.undo = self.repeat = None
         if self.snapshots is not None:
@@ -204,6 +217,8 @@ class PrimitiveEnv(EnvBase):
                 self.undo = self.undoes[a] if out.ok else None
             if self.no_repeat:  # the same move would meet the same link or palm again
                 self.repeat = a if out.reason == "link_contact" else None
+            if self.find_length and out.reason == "link_contact":
+                self._lengthen_to(out.reach_m)
             dropped = out.dropped  # from the simulated state, whatever the primitive says
             if out.reached and action.kind in ("flip", "release", "land"):
                 self.contacts = prim.result

@@ -259,20 +259,26 @@ class World:
     def hand_contacts(self) -> list[str]:
         """Parts of the hand other than the fingertips touching the object, as names
         (``finger 1 distal``, ``palm``): contacts the controllers did not plan."""
+        return sorted({name for name, _ in self.hand_contact_points()})
+
+    def hand_contact_points(self) -> list[tuple[str, np.ndarray]]:
+        """Each contact point of ``hand_contacts``: the part's name and where the point lies,
+        world ``(x, z)`` (m), what a touch sensor on the links and the palm would report."""
         out = []
         names = {0: "proximal", 1: "distal"}
         for c in self._points():
             if c[1] == self.object:
-                b, link_b = c[2], c[4]
+                b, link_b, at = c[2], c[4], c[5]
             elif c[2] == self.object:
-                b, link_b = c[1], c[3]
+                b, link_b, at = c[1], c[3], c[6]
             else:
                 continue
             if b == self.palm:
-                out.append("palm")
+                out.append(("palm", np.array([at[0], at[2]])))
             elif b in self.fingers and link_b in names:
-                out.append(f"finger {self.fingers.index(b)} {names[link_b]}")
-        return sorted(set(out))
+                out.append((f"finger {self.fingers.index(b)} {names[link_b]}",
+                            np.array([at[0], at[2]])))
+        return out
 
     def grasp_lost(self) -> str | None:
         """Why the object is not held, judged from PyBullet's contact points, or None if held.

@@ -105,6 +105,14 @@ def unlike_training(cfg: DictConfig, policy_overrides: Iterable[str] | None) -> 
     do not change what the policy sees or may do. Evaluated otherwise, a policy meets a filter,
     a time limit or an observation it did not learn with. A policy that records no
     ``trained_with`` (None) has nothing to compare."""
+    return [f"{key}={trained} (here: {now})"
+            for key, trained, now in task_differences(cfg, policy_overrides)]
+
+
+def task_differences(cfg: DictConfig, policy_overrides: Iterable[str] | None
+                     ) -> list[tuple[str, str, Any]]:
+    """``unlike_training``'s settings as ``(key, trained, now)``: the value the training
+    used and the one ``cfg`` has, each as an override writes it."""
     if policy_overrides is None:
         return []
     unlike, seen = [], set()
@@ -120,7 +128,7 @@ def unlike_training(cfg: DictConfig, policy_overrides: Iterable[str] | None) -> 
             trained = text
         now = _plain(OmegaConf.select(cfg, key, default=None))
         if not _same(trained, now):
-            unlike.append(f"{key}={text} (here: {_shown(now)})")
+            unlike.append((key, text, _shown(now)))
     for field in dataclasses.fields(TaskConfig):
         key = f"task.{field.name}"
         if key in seen or not _compared(key):
@@ -129,7 +137,7 @@ def unlike_training(cfg: DictConfig, policy_overrides: Iterable[str] | None) -> 
                          else field.default)
         now = _plain(OmegaConf.select(cfg, key, default=None))
         if now is not None and not _same(default, now):
-            unlike.append(f"{key}={_shown(default)} (here: {_shown(now)})")
+            unlike.append((key, str(_shown(default)), _shown(now)))
     return unlike
 
 

@@ -28,13 +28,14 @@ def episode(k: int, group: str, success: bool, seed: int, dropped: bool = False)
 
 
 def write_run(compose_cfg, run_dir: Path, seed: int, wins: dict[str, int], n: int = 10,
-              overrides: tuple[str, ...] = ()) -> Path:
+              overrides: tuple[str, ...] = (), policy: tuple[str, ...] | None = None) -> Path:
     run_dir.mkdir(parents=True)
     cfg = compose_cfg(f"seed={seed}", *overrides)
     path = run_dir / "run.mcap"
     with RunLog(path) as log:
-        log.write("/run/config", run_config_message(cfg, run_dir, [f"seed={seed}",
-                                                                   *overrides]))
+        log.write("/run/config", run_config_message(
+            cfg, run_dir, [f"seed={seed}", *overrides],
+            policy_overrides=None if policy is None else list(policy)))
         for it in range(1, 4):
             log.write("/train/iteration", {
                 "iteration": it, "frames": 1024 * it, "wall_s": 10.0 * it,
@@ -97,6 +98,27 @@ def test_frames_tables_and_skipped_files(sweep):
         rows["group"].tolist().index("medium") + 1
     shaped = rows[rows["variant"] == "task.reward_progress=0.1"]
     assert shaped["success_rate_mean"].tolist() == [pytest.approx(0.3)]
+
+
+def test_an_evaluation_with_another_filter_is_a_row_of_its_own(tmp_path, compose_cfg):
+    """One policy, trained with `task.no_undo=true`, evaluated with it and without: two
+    variants, two rows, not one row of both runs' episodes."""
+    trained = ("mode=train", "task.reward_progress=0.1", "task.no_undo=true")
+    root = tmp_path / "evals"
+    write_run(compose_cfg, root / "as_trained", 0, {"medium": 6},
+              overrides=("mode=eval", "task.no_undo=true"), policy=trained)
+    write_run(compose_cfg, root / "plain", 0, {"medium": 4}, overrides=("mode=eval",),
+              policy=trained)
+    frames = load([root], warn=lambda _: None)
+    variants = dict(zip(frames.runs["run_dir"].map(lambda p: Path(p).name),
+                        frames.runs["variant"], strict=True))
+    assert variants == {
+        "as_trained": "task.no_undo=true task.reward_progress=0.1",
+        "plain": "task.no_undo=true task.reward_progress=0.1 | evaluated with task.no_undo=false"}
+    rows = tables.build(frames.episodes, "comparison")
+    medium = rows[rows["group"] == "medium"].set_index("variant")
+    assert medium.loc[variants["as_trained"], "success_rate_mean"] == pytest.approx(0.6)
+    assert medium.loc[variants["plain"], "success_rate_mean"] == pytest.approx(0.4)
 
 
 def test_reading_in_several_processes_gives_the_same_frames(sweep, monkeypatch):

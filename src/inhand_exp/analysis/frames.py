@@ -23,7 +23,7 @@ import pandas as pd
 from omegaconf import ListConfig, OmegaConf
 
 from inhand_exp.record.reader import Log, LogError, read_log
-from inhand_exp.runinfo import CONF_DIR, merged
+from inhand_exp.runinfo import CONF_DIR, merged, task_differences
 
 TOPICS = ("/run/config", "/train/iteration", "/eval/episode")  # what the frames are made of
 LABELS = ("learner", "variant", "object", "perturb", "noise", "seed")
@@ -147,13 +147,30 @@ def find_logs(paths: Iterable[str | Path]) -> list[Path]:
     return out
 
 
+def _run_variant(cfg: dict) -> str:
+    """The recipe of the run's policy (``variant``), and for a run whose task settings differ
+    from its policy's training (a filter option given at evaluation), those settings as the
+    run used them (``... | evaluated with task.no_undo=true``): an evaluation with another
+    filter is another row of the tables, not more episodes of the same."""
+    policy = _policy_overrides(cfg)
+    recipe = variant(policy)
+    config = cfg.get("config")
+    if not isinstance(config, dict):
+        return recipe
+    unlike = task_differences(OmegaConf.create(config), policy)
+    if not unlike:
+        return recipe
+    return recipe + " | evaluated with " + " ".join(
+        sorted(f"{key}={now}" for key, _, now in unlike))
+
+
 def _run_row(path: Path, cfg: dict, truncated: bool, corrupt: int) -> dict:
     c = cfg.get("config", {})
     return {"log": str(path), "run_dir": str(path.parent),
             "learner": c.get("learner", {}).get("name"), "object": c.get("object", {}).get("name"),
             "perturb": c.get("perturb", {}).get("name"), "noise": c.get("noise", {}).get("name"),
             "seed": cfg.get("seed"), "mode": cfg.get("mode"),
-            "variant": variant(_policy_overrides(cfg)),
+            "variant": _run_variant(cfg),
             "goals": c.get("goals", {}).get("name"),
             "train_frames": c.get("train", {}).get("frames"),
             "checkpoint": c.get("checkpoint"), "truncated": truncated,

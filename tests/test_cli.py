@@ -212,7 +212,9 @@ def test_a_policy_carries_its_training_overrides_wherever_it_is_copied(tmp_path)
     runs = load([tmp_path / "train", tmp_path / "ev", tmp_path / "more"]).runs
     variants = dict(zip(runs["run_dir"].map(lambda d: Path(d).name), runs["variant"],
                         strict=True))
-    assert variants["ev"] == variants["train"] != variants["more"]
+    # the same recipe, evaluated without its filter: a row of its own, named so
+    assert variants["ev"] == variants["train"] + " | evaluated with task.no_undo=false"
+    assert variants["train"] != variants["more"]
     assert "task.reward_progress=0.1" in variants["ev"]
 
 

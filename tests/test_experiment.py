@@ -3,6 +3,8 @@ policy's training settings that an evaluation does not use."""
 
 from __future__ import annotations
 
+from omegaconf import OmegaConf
+
 from inhand_exp.experiment import paper_row, policy_key, table
 from inhand_exp.runinfo import unlike_training
 
@@ -44,8 +46,28 @@ def test_a_policys_store_key_ignores_what_only_the_test_set_uses(compose_cfg):
                       "perturb=heavier", "eval.episodes=7"):
         assert key(test_only) == base, test_only
     for shaping in ("train.frames=2048", "task.reward_progress=0.1", "goals.seed=5",
-                    "goals.train_groups=[medium]"):
+                    "goals.train_groups=[medium]", "task.touch_finds_length=true"):
         assert key(shaping) != base, shaping
+
+
+def test_a_task_option_at_its_default_leaves_the_store_key_as_it_was(compose_cfg, monkeypatch):
+    """Adding a task setting to the schema, at its default, must not orphan the policies
+    already stored (each costs an hour's training here): the key leaves defaults out."""
+    import dataclasses
+
+    from inhand_exp import experiment
+    from inhand_exp.config import TaskConfig
+
+    cfg = compose_cfg("goals.train_groups=[easy,medium,hard]")
+    before = policy_key(cfg)
+    newer = dataclasses.make_dataclass(
+        "NewerTask", [("some_new_filter", bool, dataclasses.field(default=False))],
+        bases=(TaskConfig,))
+    monkeypatch.setattr(experiment, "TaskConfig", newer)
+    for value, same in ((False, True), (True, False)):
+        grown = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
+        grown.task.some_new_filter = value
+        assert (policy_key(grown) == before) is same, value
 
 
 def test_the_flagged_rows_say_how_many_episodes_flipped(compose_cfg):

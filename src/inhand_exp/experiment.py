@@ -22,7 +22,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from inhand_exp import policies
-from inhand_exp.config import ConfigError
+from inhand_exp.config import ConfigError, TaskConfig
 from inhand_exp.control.hand import HandModel
 from inhand_exp.control.sample import Workspace
 from inhand_exp.envs.batched import batched_env
@@ -161,8 +161,16 @@ def policy_key(cfg: DictConfig) -> str:
     if not c["goals"]["train_groups"]:
         c["goals"]["train_groups"] = [cfg.goals.name]  # it trains on the tested group
     c["train"] = {k: c["train"][k] for k in ("frames", "num_envs")}
+    c["task"] = _unlike_defaults(c["task"], TaskConfig)
     digest = hashlib.sha256(json.dumps(c, sort_keys=True).encode()).hexdigest()[:10]
     return f"{cfg.learner.name}-{cfg.object.name}-noise_{cfg.noise.name}-seed{cfg.seed}-{digest}"
+
+
+def _unlike_defaults(section: dict, schema: type) -> dict:
+    """``section`` without the settings at their schema default: a task option added later,
+    at its default, leaves the keys of the policies already stored as they were."""
+    defaults = OmegaConf.to_container(OmegaConf.structured(schema), enum_to_str=True)
+    return {k: v for k, v in section.items() if k not in defaults or defaults[k] != v}
 
 
 def _train_shared(cfg, learner: Learner, target: int, log: RunLog, say) -> None:

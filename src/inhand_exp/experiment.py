@@ -188,6 +188,8 @@ def _train_shared(cfg, learner: Learner, target: int, log: RunLog, say) -> None:
         if learner.frames >= target:
             say(f"reusing the policy in {store} ({learner.frames} frames)")
             return
+        if not learner.frames:
+            say(f"no policy stored in {store} yet: training it")
         _train(cfg, learner, target, store, log, say)
 
 
